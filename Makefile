@@ -1,0 +1,35 @@
+# Everything the project needs, built into .venv at the repo root.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV   := .venv
+BIN    := $(VENV)/bin
+# The CPU build of torch 2.13.0 lies in /opt/wheels on these machines; elsewhere pip finds it on PyPI.
+WHEELS := $(if $(wildcard /opt/wheels),--find-links /opt/wheels,)
+STAMP  := $(VENV)/.installed
+
+.PHONY: setup demo test corpus results-foundation bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml requirements.lock
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install -q --disable-pip-version-check $(WHEELS) -c requirements.lock -e '.[dev]'
+	touch $(STAMP)
+
+demo: setup            ## the main job on embedded defaults
+	$(BIN)/nl2policy demo
+
+test: setup            ## the test suite (CI runs this)
+	$(BIN)/python -m pytest
+
+corpus:                ## refresh the shipped corpus copy from ../shared/corpus
+	cp ../shared/corpus/README.md ../shared/corpus/BRIEFING.md ../shared/corpus/vocabulary.json \
+	   ../shared/corpus/taxi.jsonl ../shared/corpus/highway.jsonl src/nl2policy/data/corpus/
+
+results-foundation: setup   ## results/foundation/tree_returns.md
+	$(BIN)/nl2policy corpus-returns --screen-episodes 10 --episodes 100 --seed 0 --out results/foundation
+
+bench: setup
+	$(BIN)/python benchmarks/env_steps.py
+
+clean:
+	rm -rf $(VENV) build src/*.egg-info

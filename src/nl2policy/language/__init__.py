@@ -1,0 +1,1 @@
+"""From text to trees: text processing, the corpus, augmentation, translators, evaluation."""

@@ -1,0 +1,79 @@
+"""How well do the corpus trees drive? Mean return of every distinct corpus tree, the random
+policy and (taxi) the optimum: the foundation's reference table.
+
+Screening every tree on a few episodes and then reporting the best on the same episodes would
+flatter it (the winner's curse), so the best and median trees are picked on screening seeds
+and re-measured on fresh seeds.
+"""
+
+from __future__ import annotations
+
+import json
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+
+from nl2policy.language.corpus import load_corpus
+from nl2policy.policy.rollout import evaluate, random_policy, tree_policy
+from nl2policy.trees import Tree, tree_to_json
+
+FRESH_SEED_OFFSET = 100_000  # final measurements use seeds disjoint from screening seeds
+
+
+@dataclass
+class Row:
+    policy: str
+    mean_return: float
+    stderr: float
+    episodes: int
+    tree: Optional[dict] = None
+
+
+def distinct_trees(domain: str) -> list[Tree]:
+    seen: dict[str, Tree] = {}
+    for spec in load_corpus(domain):
+        seen.setdefault(json.dumps(tree_to_json(spec.tree), sort_keys=True), spec.tree)
+    return list(seen.values())
+
+
+def _screen(args: tuple[str, Tree, int, int]) -> float:
+    domain, tree, episodes, seed = args
+    return evaluate(domain, tree_policy(domain, tree), episodes, seed).mean_return
+
+
+def corpus_returns(domain: str, screen_episodes: int, episodes: int, seed: int, workers: int = 2,
+                   progress: Optional[Callable[[int, int], None]] = None) -> list[Row]:
+    trees = distinct_trees(domain)
+    jobs = [(domain, t, screen_episodes, seed) for t in trees]
+    screened: list[float] = []
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        for i, value in enumerate(pool.map(_screen, jobs, chunksize=4)):
+            screened.append(value)
+            if progress:
+                progress(i + 1, len(trees))
+    order = np.argsort(screened)
+    picks = {"best corpus tree": trees[order[-1]], "median corpus tree": trees[order[len(order) // 2]]}
+    fresh = seed + FRESH_SEED_OFFSET
+    rows = [_row("random", evaluate(domain, random_policy(domain, fresh), episodes, fresh))]
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        evals = list(pool.map(_final, [(domain, t, episodes, fresh) for t in picks.values()]))
+    for (name, tree), ev in zip(picks.items(), evals):
+        rows.append(_row(name, ev, tree_to_json(tree)))
+    if domain == "taxi":
+        from nl2policy.domains.taxi import TaxiModel, expected_return, optimal_policy
+
+        rows.append(Row("optimal (value iteration, exact)", optimal_policy(TaxiModel())[0], 0.0, 0))
+        best = picks["best corpus tree"]
+        rows.append(Row("best corpus tree (exact)", expected_return(TaxiModel(), tree_policy("taxi", best)), 0.0, 0))
+    return rows
+
+
+def _final(args):
+    domain, tree, episodes, seed = args
+    return evaluate(domain, tree_policy(domain, tree), episodes, seed)
+
+
+def _row(name: str, ev, tree: Optional[dict] = None) -> Row:
+    return Row(name, ev.mean_return, ev.stderr, ev.episodes, tree)

@@ -1,0 +1,63 @@
+"""Running a policy in a domain's env and scoring it, reproducibly.
+
+Episode i of an evaluation with seed s resets the env with seed s + i, so two policies
+evaluated with the same seed meet the same traffic and the same passengers (common random
+numbers), and a number in a table can be made again exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+
+from nl2policy.domains import get_domain, make_env
+from nl2policy.trees import Tree
+
+ActFn = Callable[[np.ndarray], int]
+
+
+@dataclass
+class Evaluation:
+    mean_return: float
+    stderr: float
+    episodes: int
+    returns: list[float]
+
+    def summary(self) -> dict:
+        return {"mean_return": self.mean_return, "stderr": self.stderr, "episodes": self.episodes}
+
+
+def tree_policy(domain: str, tree: Tree) -> ActFn:
+    d = get_domain(domain)
+    return lambda x: d.tree_action(tree, x)
+
+
+def random_policy(domain: str, seed: int = 0) -> ActFn:
+    n = len(get_domain(domain).actions)
+    rng = np.random.default_rng(seed)
+    return lambda x: int(rng.integers(n))
+
+
+def evaluate(domain: str, act: ActFn, episodes: int = 20, seed: int = 0, env=None,
+             progress: Optional[Callable[[int], None]] = None) -> Evaluation:
+    """Mean episode return of `act` over `episodes` seeded episodes, with its standard error."""
+    if episodes < 1:
+        raise ValueError("episodes must be at least 1")
+    env = env or make_env(domain)
+    returns = []
+    for i in range(episodes):
+        obs, _ = env.reset(seed=seed + i)
+        total, done = 0.0, False
+        while not done:
+            obs, reward, terminated, truncated, _ = env.step(act(obs))
+            total += float(reward)
+            done = terminated or truncated
+        returns.append(total)
+        if progress:
+            progress(i + 1)
+    arr = np.array(returns)
+    stderr = float(arr.std(ddof=1) / math.sqrt(len(arr))) if len(arr) > 1 else 0.0
+    return Evaluation(float(arr.mean()), stderr, episodes, returns)

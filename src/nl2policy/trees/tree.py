@@ -1,0 +1,94 @@
+"""The tree data type and what a tree can do on its own: act, measure itself, list questions."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterator, Mapping, Union
+
+MAX_DEPTH = 3
+"""Most questions on any root-to-leaf path: the paper's 4-level grid."""
+
+GRID_SLOTS = 2 ** (MAX_DEPTH + 1) - 1
+"""15 slots: a complete binary tree of 4 levels."""
+
+
+@dataclass(frozen=True)
+class Vocabulary:
+    """The ids a domain allows, with their wording, in a fixed order.
+
+    Order matters: it fixes token ids for the translators and action indices for the envs.
+    """
+
+    domain: str
+    questions: Mapping[str, str]
+    actions: Mapping[str, str]
+
+    def __post_init__(self) -> None:
+        clash = set(self.questions) & set(self.actions)
+        if clash:
+            raise ValueError(f"ids used as both question and action: {sorted(clash)}")
+
+    @property
+    def question_ids(self) -> list[str]:
+        return list(self.questions)
+
+    @property
+    def action_ids(self) -> list[str]:
+        return list(self.actions)
+
+
+@dataclass(frozen=True)
+class Leaf:
+    action: str
+
+    def act(self, answers: Mapping[str, bool]) -> str:
+        return self.action
+
+
+@dataclass(frozen=True)
+class Node:
+    question: str
+    yes: "Tree"
+    no: "Tree"
+
+    def act(self, answers: Mapping[str, bool]) -> str:
+        """Follow the answers down to an action; `answers` maps question id to True/False."""
+        node: Tree = self
+        while isinstance(node, Node):
+            node = node.yes if answers[node.question] else node.no
+        return node.action
+
+
+Tree = Union[Leaf, Node]
+
+
+def depth(tree: Tree) -> int:
+    """Number of questions on the longest root-to-leaf path."""
+    if isinstance(tree, Leaf):
+        return 0
+    return 1 + max(depth(tree.yes), depth(tree.no))
+
+
+def questions_used(tree: Tree) -> set[str]:
+    return {n.question for n in iter_nodes(tree)}
+
+
+def iter_nodes(tree: Tree) -> Iterator[Node]:
+    """Internal nodes in pre-order."""
+    if isinstance(tree, Node):
+        yield tree
+        yield from iter_nodes(tree.yes)
+        yield from iter_nodes(tree.no)
+
+
+def iter_leaves(tree: Tree) -> Iterator[Leaf]:
+    if isinstance(tree, Leaf):
+        yield tree
+    else:
+        yield from iter_leaves(tree.yes)
+        yield from iter_leaves(tree.no)
+
+
+def size(tree: Tree) -> int:
+    """Number of nodes and leaves."""
+    return 1 if isinstance(tree, Leaf) else 1 + size(tree.yes) + size(tree.no)
