@@ -92,6 +92,23 @@ def corpus_returns_cmd(
     console.print(path.read_text())
 
 
+def _register_area_commands() -> None:
+    """Each area (policy, language, app) adds its own commands from its ``commands`` module."""
+    import importlib
+
+    for area in ("policy", "language", "app"):
+        try:
+            module = importlib.import_module(f"nl2policy.{area}.commands")
+        except ModuleNotFoundError as exc:
+            if exc.name not in (f"nl2policy.{area}", f"nl2policy.{area}.commands"):
+                raise
+            continue
+        module.register(app)
+
+
+_register_area_commands()
+
+
 def main() -> None:  # pragma: no cover - console entry
     app()
 

@@ -13,7 +13,7 @@ DOMAINS = ("taxi", "highway")
 
 _ENTRY_POINTS = {
     "nl2policy/Taxi-v0": "nl2policy.domains.taxi:TaxiEnv",
-    "nl2policy/Highway-v0": "nl2policy.domains.highway:make_highway_env",
+    "nl2policy/Highway-v0": "nl2policy.domains.highway:HighwayFeatures",
 }
 for _env_id, _entry in _ENTRY_POINTS.items():
     if _env_id not in gym.registry:

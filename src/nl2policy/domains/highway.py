@@ -69,30 +69,40 @@ def kinematics_to_features(obs: np.ndarray, lanes: int = LANES) -> np.ndarray:
     return np.array([gap_ahead, gap_behind, left, right, position, speed], dtype=np.float32)
 
 
-class HighwayFeatures(gym.Wrapper):
-    """highway-env with our feature observation and our action order."""
+class HighwayFeatures(gym.Env):
+    """highway-env with our feature observation and our action order.
 
-    def __init__(self, env: gym.Env) -> None:
-        super().__init__(env)
+    It owns the highway-env instance instead of subclassing ``gym.Wrapper`` so that the
+    registered env is itself the unwrapped env: Gymnasium's env checker and SB3's checks
+    then see exactly the spaces a policy sees.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 1}
+
+    def __init__(self, render_mode: Optional[str] = None, config: Optional[dict] = None) -> None:
+        self.render_mode = render_mode
+        merged = {**BASE_CONFIG, **(config or {})}
+        self.highway = gym.make("highway-fast-v0", config=merged, render_mode=render_mode).unwrapped
+        self.lanes = int(self.highway.config["lanes_count"])
         self.observation_space = spaces.Box(0.0, 1.0, shape=(6,), dtype=np.float32)
         self.action_space = spaces.Discrete(len(META_ACTION))
         self.last_kinematics: Optional[np.ndarray] = None
 
     def _features(self, obs: np.ndarray) -> np.ndarray:
         self.last_kinematics = obs
-        return kinematics_to_features(obs, self.env.unwrapped.config["lanes_count"])
+        return kinematics_to_features(obs, self.lanes)
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
-        obs, info = self.env.reset(seed=seed, options=options)
+        super().reset(seed=seed)
+        obs, info = self.highway.reset(seed=seed, options=options)
         return self._features(obs), info
 
     def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(META_ACTION[int(action)])
+        obs, reward, terminated, truncated, info = self.highway.step(META_ACTION[int(action)])
         return self._features(obs), float(reward), terminated, truncated, info
 
+    def render(self):
+        return self.highway.render()
 
-def make_highway_env(render_mode: Optional[str] = None, config: Optional[dict] = None) -> gym.Env:
-    """The registered ``nl2policy/Highway-v0``; `config` overrides highway-env settings."""
-    merged = {**BASE_CONFIG, **(config or {})}
-    base = gym.make("highway-fast-v0", config=merged, render_mode=render_mode)
-    return HighwayFeatures(base.unwrapped)
+    def close(self) -> None:
+        self.highway.close()

@@ -142,7 +142,7 @@ class TaxiModel:
 class TaxiEnv(gym.Env):
     """Gymnasium env over `TaxiModel`; one step is one decision (a wait or a whole trip)."""
 
-    metadata = {"render_modes": ["ansi"]}
+    metadata = {"render_modes": ["ansi"], "render_fps": 4}
 
     def __init__(self, model: Optional[TaxiModel] = None, render_mode: Optional[str] = None) -> None:
         self.model = model or TaxiModel()

@@ -1,0 +1,71 @@
+"""Corpus access: the shipped copy, the override, and splits that can hold writers out."""
+
+import shutil
+
+import pytest
+
+from nl2policy.data import PACKAGE_DATA, corpus_dir
+from nl2policy.language.corpus import kfold, load_corpus, writers
+
+
+def test_shipped_copy_matches_shared_corpus_when_present():
+    shared = PACKAGE_DATA.parents[2].parent / "shared" / "corpus"
+    if not shared.is_dir():
+        pytest.skip("no ../shared/corpus beside this checkout (a clone elsewhere)")
+    for name in ("vocabulary.json", "taxi.jsonl", "highway.jsonl", "BRIEFING.md", "README.md"):
+        assert (shared / name).read_bytes() == (PACKAGE_DATA / "corpus" / name).read_bytes(), f"run `make corpus`: {name}"
+
+
+def test_load_with_writers():
+    for domain in ("taxi", "highway"):
+        specs = load_corpus(domain)
+        assert len(specs) == 200
+        assert len(writers(specs)) == 8
+        assert all(s.domain == domain and s.description for s in specs)
+
+
+def test_env_var_points_elsewhere(tmp_path, monkeypatch):
+    for name in ("vocabulary.json", "taxi.jsonl"):
+        shutil.copy(PACKAGE_DATA / "corpus" / name, tmp_path / name)
+    lines = (tmp_path / "taxi.jsonl").read_text().splitlines()[:7]
+    (tmp_path / "taxi.jsonl").write_text("\n".join(lines) + "\n")
+    monkeypatch.setenv("NL2POLICY_CORPUS", str(tmp_path))
+    assert corpus_dir() == tmp_path
+    assert len(load_corpus("taxi")) == 7
+    monkeypatch.setenv("NL2POLICY_CORPUS", str(tmp_path / "missing"))
+    with pytest.raises(FileNotFoundError, match="NL2POLICY_CORPUS"):
+        corpus_dir()
+
+
+def test_bad_corpus_line_names_file_and_line(tmp_path, monkeypatch):
+    shutil.copy(PACKAGE_DATA / "corpus" / "vocabulary.json", tmp_path)
+    (tmp_path / "taxi.jsonl").write_text('{"id": "x", "domain": "taxi", "writer": "w", "tree": {"do": "fly"}, "description": "d"}\n')
+    monkeypatch.setenv("NL2POLICY_CORPUS", str(tmp_path))
+    with pytest.raises(ValueError, match=r"taxi.jsonl:1: .*unknown action 'fly'"):
+        load_corpus("taxi")
+
+
+def test_kfold_partitions_items():
+    specs = load_corpus("taxi")
+    seen = []
+    for train, test in kfold(specs, k=5, seed=3):
+        assert not set(train) & set(test)
+        assert len(train) + len(test) == len(specs)
+        seen += test
+    assert sorted(seen) == list(range(len(specs)))
+    assert [t for _, t in kfold(specs, 5, seed=3)] == [t for _, t in kfold(specs, 5, seed=3)]
+    assert [t for _, t in kfold(specs, 5, seed=3)] != [t for _, t in kfold(specs, 5, seed=4)]
+
+
+def test_kfold_by_writer_holds_whole_writers_out():
+    specs = load_corpus("highway")
+    folds = list(kfold(specs, k=4, seed=0, by_writer=True))
+    held = []
+    for train, test in folds:
+        test_writers = {specs[i].writer for i in test}
+        assert test_writers.isdisjoint({specs[i].writer for i in train})
+        assert len(test_writers) == 2
+        held += sorted(test_writers)
+    assert sorted(held) == writers(specs)
+    with pytest.raises(ValueError, match="only 8 writers"):
+        list(kfold(specs, k=9, by_writer=True))

@@ -1,0 +1,131 @@
+"""The two domains: specs, registered envs that pass Gymnasium's checker, and the taxi model."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from nl2policy.domains import DOMAINS, get_domain, make_env
+from nl2policy.domains.highway import LANE_WIDTH, HighwayFeatures, kinematics_to_features
+from nl2policy.domains.taxi import TaxiEnv, TaxiModel, TaxiState, expected_return, optimal_policy
+from nl2policy.language.corpus import load_corpus
+from nl2policy.policy.rollout import evaluate, random_policy, tree_policy
+
+
+def test_unknown_domain_is_a_clear_error():
+    with pytest.raises(KeyError, match="unknown domain 'boat'"):
+        get_domain("boat")
+
+
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_spec_matches_vocabulary(domain):
+    d = get_domain(domain)
+    assert d.weights.shape == (len(d.questions), len(d.features))
+    assert (np.abs(d.weights).sum(axis=1) > 0).all(), "every question tests some feature"
+    env = make_env(domain)
+    assert env.action_space.n == len(d.actions)
+    assert env.observation_space.shape == (len(d.features),)
+
+
+def test_taxi_env_passes_checker():
+    check_env(gym.make("nl2policy/Taxi-v0").unwrapped)
+
+
+def test_highway_env_passes_checker():
+    check_env(gym.make("nl2policy/Highway-v0").unwrapped)
+    assert isinstance(gym.make("nl2policy/Highway-v0").unwrapped, HighwayFeatures)
+
+
+def test_taxi_questions_test_the_right_features(taxi):
+    state = TaxiState(place=2, passenger=True, heavy=False, long_wait=True, tick=0)
+    assert taxi.answers(state.features()) == {
+        "at_airport": False, "at_village": False, "at_city": True, "has_passenger": True,
+        "heavy_traffic": False, "long_wait": True}
+
+
+def test_taxi_impossible_answers(taxi):
+    assert len(taxi.possible_answer_sets) == 3 * 2 ** 3  # one place at a time, 3 free binary questions
+    base = dict(at_airport=True, at_village=False, at_city=False, has_passenger=False, heavy_traffic=False, long_wait=False)
+    assert taxi.is_possible(base)
+    assert not taxi.is_possible({**base, "at_city": True})
+    assert not taxi.is_possible({**base, "at_airport": False})
+
+
+def test_highway_features_from_kinematics(highway):
+    # ego in the middle lane at 28 m/s; a car 12 m ahead in my lane, one 30 m behind in the left lane
+    obs = np.array([
+        [1, 100.0, 1 * LANE_WIDTH, 28.0, 0.0],
+        [1, 12.0, 0.0, -3.0, 0.0],
+        [1, -30.0, -LANE_WIDTH, 1.0, 0.0],
+        [0, 0, 0, 0, 0],
+        [0, 0, 0, 0, 0],
+    ])
+    x = kinematics_to_features(obs)
+    np.testing.assert_allclose(x, [0.12, 1.0, 0.30, 1.0, 0.5, 0.7], atol=1e-6)
+    assert highway.answers(x) == {
+        "car_ahead_close": True, "car_behind_close": False, "left_lane_free": True, "right_lane_free": True,
+        "in_left_lane": False, "in_right_lane": False, "going_fast": True}
+    obs[0, 2] = 0.0  # leftmost lane: no lane to the left
+    x = kinematics_to_features(obs)
+    answers = highway.answers(x)
+    assert answers["in_left_lane"] and not answers["left_lane_free"]
+    assert highway.is_possible(answers)
+
+
+def test_taxi_simulation_matches_the_exact_model():
+    tree = load_corpus("taxi")[4].tree  # passenger -> airport, else jammed -> village, else city
+    act = tree_policy("taxi", tree)
+    exact = expected_return(TaxiModel(), act)
+    ev = evaluate("taxi", act, episodes=400, seed=0)
+    assert abs(ev.mean_return - exact) < 4 * ev.stderr
+    assert 7.0 < exact < 8.4
+
+
+def test_taxi_scale_random_best_optimum():
+    model = TaxiModel()
+    optimum, policy = optimal_policy(model)
+    assert 8.0 < optimum < 9.0
+    rand = evaluate("taxi", random_policy("taxi", 1), episodes=300, seed=1)
+    assert 0.8 < rand.mean_return < 2.2
+    exact_returns = [expected_return(model, tree_policy("taxi", s.tree)) for s in load_corpus("taxi")[:60]]
+    assert max(exact_returns) <= optimum + 1e-9
+    assert max(exact_returns) > rand.mean_return + 4
+
+
+def test_optimum_is_a_real_policy_of_the_env():
+    """Acting with the computed optimal policy in the env earns its computed value."""
+    model = TaxiModel()
+    optimum, policy = optimal_policy(model)
+    env = TaxiEnv(model)
+    returns = []
+    for ep in range(300):
+        env.reset(seed=10_000 + ep)
+        done, total = False, 0.0
+        while not done:
+            _, r, done, _, _ = env.step(policy[env.state])
+            total += r
+        returns.append(total)
+    stderr = np.std(returns, ddof=1) / np.sqrt(len(returns))
+    assert abs(np.mean(returns) - optimum) < 4 * stderr
+
+
+def test_every_corpus_tree_runs_in_its_env():
+    taxi_env = make_env("taxi")
+    for spec in load_corpus("taxi"):
+        evaluate("taxi", tree_policy("taxi", spec.tree), episodes=1, seed=0, env=taxi_env)
+    highway_env = make_env("highway")
+    highway = get_domain("highway")
+    obs, _ = highway_env.reset(seed=0)
+    for spec in load_corpus("highway"):  # a few steps each: a full episode of 200 trees is minutes
+        for _ in range(3):
+            action = highway.tree_action(spec.tree, obs)
+            obs, _, terminated, truncated, _ = highway_env.step(action)
+            if terminated or truncated:
+                obs, _ = highway_env.reset()
+
+
+def test_evaluation_is_reproducible():
+    tree = load_corpus("highway")[0].tree
+    a = evaluate("highway", tree_policy("highway", tree), episodes=2, seed=5)
+    b = evaluate("highway", tree_policy("highway", tree), episodes=2, seed=5)
+    assert a.returns == b.returns
