@@ -6,9 +6,16 @@ BIN    := $(VENV)/bin
 WHEELS := $(if $(wildcard /opt/wheels),--find-links /opt/wheels,)
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup demo test corpus results-foundation bench clean
+.PHONY: setup browser demo test corpus results-foundation bench screenshots serve clean
 
-setup: $(STAMP)
+setup: $(STAMP) browser
+
+# Browser tests drive Debian's chromium (Playwright never downloads a browser here).
+browser:
+	@command -v chromium >/dev/null || { \
+	  echo "installing Debian's chromium for the browser tests"; \
+	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
+	  || { echo "could not install chromium (needs root and Debian's packages)"; exit 1; }; }
 
 $(STAMP): pyproject.toml requirements.lock
 	$(PYTHON) -m venv $(VENV)
@@ -26,7 +33,14 @@ corpus:                ## refresh the shipped corpus copy from ../shared/corpus
 	   ../shared/corpus/taxi.jsonl ../shared/corpus/highway.jsonl src/nl2policy/data/corpus/
 
 results-foundation: setup   ## results/foundation/tree_returns.md
-	$(BIN)/nl2policy corpus-returns --screen-episodes 10 --episodes 100 --seed 0 --out results/foundation
+	$(BIN)/nl2policy corpus-returns --domain taxi --screen-episodes 100 --episodes 2000 --seed 0 --out results/foundation
+	$(BIN)/nl2policy corpus-returns --domain highway --screen-episodes 10 --episodes 100 --seed 0 --out results/foundation
+
+serve: setup          ## the web app on http://127.0.0.1:8000/
+	$(BIN)/nl2policy serve
+
+screenshots: setup    ## docs/*.png, one per page, taken by the browser test
+	NL2POLICY_SCREENSHOTS=docs $(BIN)/python -m pytest tests/test_browser.py
 
 bench: setup
 	$(BIN)/python benchmarks/env_steps.py

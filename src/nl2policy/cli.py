@@ -67,29 +67,46 @@ def demo(episodes: int = typer.Option(10, min=1), seed: int = typer.Option(0)) -
     run_demo(console, episodes, seed)
 
 
+@app.command()
+def run(
+    text: Optional[str] = typer.Argument(None, help="What the robot should do, in plain English (default: an example)"),
+    domain: str = typer.Option("taxi", help=f"One of: {', '.join(DOMAINS)}"),
+    steps: int = typer.Option(10_000, min=256, help="PPO env steps"),
+    seed: int = typer.Option(0),
+    out: Path = typer.Option(Path("runs/main"), help="Output folder for trees, curve and summary"),
+) -> None:
+    """The main job: translate a description, show the tree, optimize it with PPO, show it again."""
+    from nl2policy.pipeline import EXAMPLES, run_pipeline
+
+    domain_or_fail(domain)
+    text = EXAMPLES[domain] if text is None else text
+    if not text.strip():
+        fail("the description is empty: say what the robot should do")
+    run_pipeline(console, err, domain, text, steps, seed, out / domain)
+    console.print("\nTo describe, edit and optimize policies in the browser: [bold]make serve[/] "
+                  "(or `.venv/bin/nl2policy serve`), then open http://127.0.0.1:8000/")
+
+
 @app.command("corpus-returns")
 def corpus_returns_cmd(
-    domain: list[str] = typer.Option(list(DOMAINS), help="Domains to measure"),
+    domain: str = typer.Option(..., help=f"One of: {', '.join(DOMAINS)}"),
     screen_episodes: int = typer.Option(10, min=1, help="Episodes per tree when ranking all corpus trees"),
     episodes: int = typer.Option(100, min=2, help="Episodes for the final, fresh-seed measurements"),
     seed: int = typer.Option(0),
-    out: Path = typer.Option(Path("results/foundation"), help="Folder for tree_returns.md / .json"),
+    out: Path = typer.Option(Path("results/foundation"), help="Folder for tree_returns_<domain>.md / .json"),
 ) -> None:
     """Mean return of random, best and median corpus tree, and taxi's optimum (results table)."""
     from nl2policy.policy.corpus_returns import corpus_returns
     from nl2policy.report import write_returns_table
 
-    all_rows = {}
-    for name in domain:
-        domain_or_fail(name)
-        with progress_bar() as bar:
-            task = bar.add_task(f"{name}: screening corpus trees", total=None)
-            all_rows[name] = corpus_returns(name, screen_episodes, episodes, seed,
-                                            progress=lambda i, n: bar.update(task, completed=i, total=n))
-    command = "nl2policy corpus-returns " + " ".join(
-        [*(f"--domain {d}" for d in domain), f"--screen-episodes {screen_episodes}", f"--episodes {episodes}", f"--seed {seed}", f"--out {out}"])
-    path = write_returns_table(all_rows, out, command)
-    console.print(path.read_text())
+    domain_or_fail(domain)
+    with progress_bar() as bar:
+        task = bar.add_task(f"{domain}: screening corpus trees", total=None)
+        rows = corpus_returns(domain, screen_episodes, episodes, seed,
+                              progress=lambda i, n: bar.update(task, completed=i, total=n))
+    command = (f"nl2policy corpus-returns --domain {domain} --screen-episodes {screen_episodes} "
+               f"--episodes {episodes} --seed {seed} --out {out}")
+    console.print(write_returns_table(domain, rows, out, command).read_text())
 
 
 def _register_area_commands() -> None:

@@ -21,22 +21,21 @@ def provenance(command: str) -> dict:
     }
 
 
-def write_returns_table(rows_by_domain: dict, out: Path, command: str) -> Path:
+def write_returns_table(domain: str, rows: list, out: Path, command: str) -> Path:
+    """results/<out>/tree_returns_<domain>.md and .json."""
     out.mkdir(parents=True, exist_ok=True)
     meta = provenance(command)
-    lines = ["# Mean episode return of reference policies", "", f"Made by: `{command}`  ", f"On: {meta['made']}", ""]
-    for domain, rows in rows_by_domain.items():
-        lines += [f"## {domain}", "", "| policy | mean return | stderr | episodes |", "|---|---:|---:|---:|"]
-        for r in rows:
-            eps = r.episodes if r.episodes else "exact"
-            se = f"{r.stderr:.3f}" if r.episodes else "-"
-            lines.append(f"| {r.policy} | {r.mean_return:.3f} | {se} | {eps} |")
-        for r in rows:
-            if r.tree:
-                lines.append(f"\n{r.policy}: `{json.dumps(r.tree)}`")
-        lines.append("")
-    md = out / "tree_returns.md"
+    lines = [f"# Mean episode return of reference policies: {domain}", "", f"Made by: `{command}`  ", f"On: {meta['made']}", ""]
+    lines += ["| policy | mean return | stderr | episodes |", "|---|---:|---:|---:|"]
+    for r in rows:
+        eps = r.episodes if r.episodes else "exact"
+        se = f"{r.stderr:.3f}" if r.episodes else "-"
+        lines.append(f"| {r.policy} | {r.mean_return:.3f} | {se} | {eps} |")
+    for r in rows:
+        if r.tree:
+            lines.append(f"\n{r.policy}: `{json.dumps(r.tree)}`")
+    lines.append("")
+    md = out / f"tree_returns_{domain}.md"
     md.write_text("\n".join(lines))
-    (out / "tree_returns.json").write_text(json.dumps(
-        {"meta": meta, "rows": {d: [asdict(r) for r in rows] for d, rows in rows_by_domain.items()}}, indent=2))
+    (out / f"tree_returns_{domain}.json").write_text(json.dumps({"meta": meta, "rows": [asdict(r) for r in rows]}, indent=2))
     return md

@@ -61,11 +61,13 @@ def to_svg(
     vocab: Optional[Vocabulary] = None,
     highlight: Optional[Mapping[int, str]] = None,
     width: int = 960,
+    notes: Optional[Mapping[int, str]] = None,
 ) -> str:
     """A grid-laid-out SVG: each slot of the 15-slot grid has a fixed place.
 
     `highlight` maps grid slot -> CSS colour, used by the app to mark changed or
-    low-confidence nodes. Each node carries ``data-slot`` so pages can attach handlers.
+    low-confidence nodes; `notes` maps slot -> a short line shown under the label (a
+    confidence, say). Each node carries ``data-slot`` so pages can attach handlers.
     """
     grid = to_grid(tree)
     highlight = dict(highlight or {})
@@ -107,8 +109,13 @@ def to_svg(
             f'<rect x="{x - box_w / 2:.1f}" y="{y - box_h / 2:.1f}" width="{box_w:.1f}" height="{box_h}" rx="{rx}" '
             f'fill="{fill}" stroke="#456"/>'
         )
-        for i, line in enumerate(_wrap(_label(item, vocab), max(8, int(box_w / 6.5)))[:3]):
+        note = (notes or {}).get(slot)
+        lines = _wrap(_label(item, vocab), max(8, int(box_w / 6.5)))[: 2 if note else 3]
+        for i, line in enumerate(lines):
             parts.append(f'<text x="{x:.1f}" y="{y - 10 + i * 14:.1f}" text-anchor="middle">{escape(line)}</text>')
+        if note:
+            parts.append(f'<text class="note" x="{x:.1f}" y="{y + 22:.1f}" text-anchor="middle" font-size="10" '
+                         f'fill="#333">{escape(note)}</text>')
         parts.append("</g>")
     parts.append("</svg>")
     return "".join(parts)

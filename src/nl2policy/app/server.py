@@ -1,0 +1,251 @@
+"""The FastAPI app: a JSON API (with its OpenAPI schema at /docs) for every page action, and
+three pages (Specify, Optimize, Collect) served as static HTML + JS that call it.
+"""
+
+from __future__ import annotations
+
+import json
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+from fastapi import FastAPI, HTTPException
+from fastapi.responses import FileResponse, JSONResponse, Response
+from fastapi.staticfiles import StaticFiles
+from pydantic import BaseModel, Field
+
+from nl2policy.app.runs import RunManager, read_curve
+from nl2policy.app.store import Store
+from nl2policy.domains import DOMAINS, get_domain
+from nl2policy.trees import GRID_SLOTS, TreeError, from_grid, parse_tree, to_grid, to_svg, to_text, tree_to_json
+
+STATIC = Path(__file__).resolve().parent / "static"
+MAX_DESCRIPTION = 5000  # characters; the corpus's longest is about 1,500
+MAX_STEPS = 200_000
+LOW_CONFIDENCE = 0.5
+
+
+class TranslateIn(BaseModel):
+    domain: str
+    description: str = Field(..., max_length=MAX_DESCRIPTION)
+
+
+class TreeIn(BaseModel):
+    domain: str
+    tree: Optional[Any] = None  # corpus tree JSON ...
+    grid: Optional[list[Optional[str]]] = None  # ... or the 15-slot grid
+
+
+class RunIn(BaseModel):
+    domain: str
+    tree: Any
+    steps: int = Field(20_000, ge=256, le=MAX_STEPS)
+    seed: int = Field(0, ge=0)
+    spec_id: Optional[str] = None
+
+
+class SubmissionIn(BaseModel):
+    domain: str
+    writer: str = Field(..., min_length=1, max_length=60)
+    grid: list[Optional[str]]
+    description: str = Field(..., min_length=1, max_length=MAX_DESCRIPTION)
+
+
+def _domain(name: str):
+    if name not in DOMAINS:
+        raise HTTPException(404, f"unknown domain {name!r}; choose one of: {', '.join(DOMAINS)}")
+    return get_domain(name)
+
+
+def _parse(domain: str, tree: Any = None, grid: Optional[list] = None):
+    d = _domain(domain)
+    try:
+        if grid is not None:
+            return from_grid(grid, d.vocab)
+        if tree is None:
+            raise TreeError("give a tree or a grid", "request")
+        return parse_tree(tree if not isinstance(tree, str) else tree, d.vocab)
+    except TreeError as exc:
+        raise HTTPException(422, {"message": exc.message, "where": exc.where, "error": str(exc)}) from exc
+
+
+def _tree_view(domain: str, tree, node_confidence: Optional[dict] = None) -> dict:
+    vocab = get_domain(domain).vocab
+    conf = {int(k): float(v) for k, v in (node_confidence or {}).items()}
+    low = {slot: "#ffcdd2" for slot, c in conf.items() if c < LOW_CONFIDENCE}
+    return {"tree": tree_to_json(tree), "grid": to_grid(tree), "text": to_text(tree, vocab),
+            "svg": to_svg(tree, vocab, highlight=low, notes={k: f"confidence {v:.0%}" for k, v in conf.items()}),
+            "node_confidence": conf}
+
+
+def changed_slots(before: list, after: list) -> list[int]:
+    return [i for i in range(GRID_SLOTS) if before[i] != after[i]]
+
+
+def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = None,
+               results_dir: Optional[Path] = None, max_parallel_runs: int = 1) -> FastAPI:
+    """Build the app. `translator(domain, text)` defaults to the trained translator."""
+    store = Store(db_path)
+    runs = RunManager(store, max_parallel=max_parallel_runs)
+    runs_dir = Path(data_dir) / "runs"
+    results = results_dir or Path.cwd() / "results"
+
+    def translate(domain: str, text: str):
+        if translator is not None:
+            return translator(domain, text)
+        from nl2policy.language.translate import translate as real
+
+        return real(domain, text)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        runs.start()
+        yield
+        runs.stop()
+
+    app = FastAPI(title="nl2policy", version="0.1.0", lifespan=lifespan,
+                  description="Describe a policy in plain English, inspect and edit its tree, optimize it with PPO.")
+    app.state.store, app.state.runs = store, runs
+
+    # --- domains ----------------------------------------------------------------------------
+    @app.get("/api/domains")
+    def domains() -> dict:
+        return {name: {"questions": dict(get_domain(name).vocab.questions), "actions": dict(get_domain(name).vocab.actions)}
+                for name in DOMAINS}
+
+    @app.get("/api/briefing/{domain}")
+    def briefing(domain: str) -> dict:
+        _domain(domain)
+        from nl2policy.data import corpus_dir
+
+        text = (corpus_dir() / "BRIEFING.md").read_text()
+        title = {"taxi": "## The taxi", "highway": "## The highway"}[domain]
+        section = text.split(title, 1)[1].split("\n## ", 1)[0]
+        tree_rules = text.split("## The tree", 1)[1] if "## The tree" in text else ""
+        return {"domain": domain, "briefing": section.strip(), "tree_rules": tree_rules.strip()}
+
+    # --- specify ----------------------------------------------------------------------------
+    @app.post("/api/translate")
+    def translate_endpoint(body: TranslateIn) -> dict:
+        _domain(body.domain)
+        if not body.description.strip():
+            raise HTTPException(422, {"message": "the description is empty: say what the robot should do", "where": "description"})
+        result = translate(body.domain, body.description)
+        view = _tree_view(body.domain, result.tree, result.node_confidence)
+        spec = store.add_spec(body.domain, body.description, view["tree"], result.confidence, list(result.warnings),
+                              view["node_confidence"])
+        return {"spec_id": spec["id"], "confidence": result.confidence, "warnings": list(result.warnings), **view}
+
+    @app.post("/api/validate")
+    def validate(body: TreeIn) -> dict:
+        tree = _parse(body.domain, body.tree, body.grid)
+        return _tree_view(body.domain, tree)
+
+    @app.get("/api/specs/{spec_id}")
+    def get_spec(spec_id: str) -> dict:
+        spec = store.get_spec(spec_id)
+        if not spec:
+            raise HTTPException(404, f"no specification {spec_id!r}")
+        tree = parse_tree(spec["tree"], get_domain(spec["domain"]).vocab)
+        return {**spec, **_tree_view(spec["domain"], tree, spec["node_confidence"])}
+
+    @app.put("/api/specs/{spec_id}")
+    def edit_spec(spec_id: str, body: TreeIn) -> dict:
+        spec = store.get_spec(spec_id)
+        if not spec:
+            raise HTTPException(404, f"no specification {spec_id!r}")
+        if body.domain != spec["domain"]:
+            raise HTTPException(422, {"message": f"specification {spec_id} is for {spec['domain']}", "where": "domain"})
+        tree = _parse(body.domain, body.tree, body.grid)
+        store.update_spec_tree(spec_id, tree_to_json(tree))
+        return get_spec(spec_id)
+
+    # --- optimize ---------------------------------------------------------------------------
+    @app.post("/api/runs", status_code=201)
+    def start_run(body: RunIn) -> dict:
+        tree = _parse(body.domain, body.tree)
+        run = store.add_run(body.domain, tree_to_json(tree), body.steps, body.seed, runs_dir, body.spec_id)
+        runs.submit(run["id"])
+        return run_view(run["id"])
+
+    @app.get("/api/runs")
+    def list_runs() -> list[dict]:
+        return store.list_runs()
+
+    @app.get("/api/runs/{run_id}")
+    def run_view(run_id: str) -> dict:
+        run = store.get_run(run_id)
+        if not run:
+            raise HTTPException(404, f"no run {run_id!r}")
+        out = Path(run["out_dir"])
+        view: dict[str, Any] = {**run, "curve": read_curve(out, run["domain"])}
+        vocab = get_domain(run["domain"]).vocab
+        initial = parse_tree(run["tree"], vocab)
+        view["initial"] = _tree_view(run["domain"], initial)
+        final_path = out / "final_tree.json"
+        if run["status"] == "finished" and final_path.is_file():
+            final_json = json.loads(final_path.read_text())
+            try:
+                final = parse_tree(final_json, vocab)
+                slots = changed_slots(to_grid(initial), to_grid(final))
+                view["final"] = {**_tree_view(run["domain"], final), "changed": slots,
+                                 "svg": to_svg(final, vocab, highlight={s: "#fff59d" for s in slots})}
+            except TreeError:  # a raw threshold test the domain has no question for
+                view["final"] = {"tree": final_json, "changed": [], "svg": None, "text": json.dumps(final_json, indent=1)}
+        return view
+
+    @app.post("/api/runs/{run_id}/resume")
+    def resume_run(run_id: str) -> dict:
+        run = store.get_run(run_id)
+        if not run:
+            raise HTTPException(404, f"no run {run_id!r}")
+        if run["status"] not in ("interrupted", "failed"):
+            raise HTTPException(409, f"run {run_id} is {run['status']}; only interrupted or failed runs resume")
+        runs.submit(run_id)
+        return run_view(run_id)
+
+    @app.get("/api/runs/{run_id}/policy")
+    def download_policy(run_id: str) -> Response:
+        view = run_view(run_id)
+        if "final" not in view:
+            raise HTTPException(409, f"run {run_id} has not finished")
+        body = {"domain": view["domain"], "initial_tree": view["initial"]["tree"], "final_tree": view["final"]["tree"],
+                "summary": view["summary"]}
+        return JSONResponse(body, headers={"Content-Disposition": f'attachment; filename="policy-{run_id}.json"'})
+
+    @app.get("/api/baselines/{domain}")
+    def baselines(domain: str) -> dict:
+        _domain(domain)
+        path = results / "policy" / domain / "baseline_curves.json"
+        return json.loads(path.read_text()) if path.is_file() else {}
+
+    # --- collect ----------------------------------------------------------------------------
+    @app.post("/api/submissions", status_code=201)
+    def submit(body: SubmissionIn) -> dict:
+        tree = _parse(body.domain, grid=body.grid)
+        if not body.description.strip():
+            raise HTTPException(422, {"message": "describe your tree in words before submitting", "where": "description"})
+        return store.add_submission(body.domain, body.writer.strip(), tree_to_json(tree), body.description.strip())
+
+    @app.get("/api/submissions")
+    def submissions(domain: Optional[str] = None) -> list[dict]:
+        if domain:
+            _domain(domain)
+        return store.list_submissions(domain)
+
+    # --- pages ------------------------------------------------------------------------------
+    app.mount("/static", StaticFiles(directory=STATIC), name="static")
+
+    @app.get("/", include_in_schema=False)
+    def specify_page() -> FileResponse:
+        return FileResponse(STATIC / "specify.html")
+
+    @app.get("/optimize", include_in_schema=False)
+    def optimize_page() -> FileResponse:
+        return FileResponse(STATIC / "optimize.html")
+
+    @app.get("/collect", include_in_schema=False)
+    def collect_page() -> FileResponse:
+        return FileResponse(STATIC / "collect.html")
+
+    return app

@@ -1,0 +1,65 @@
+"""The main job, end to end in the terminal: description -> tree -> PPO -> readable tree.
+
+``nl2policy run --domain D "TEXT"`` translates the text (training the default translator
+first if there is none), shows the tree with its confidence, improves it with PPO from the
+tree-initialized DDT, and shows the tree before and after with their returns.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from rich.console import Console
+from rich.panel import Panel
+from rich.table import Table
+
+from nl2policy.domains import get_domain
+from nl2policy.trees import Tree, TreeError, parse_tree, to_text
+
+EXAMPLES = {
+    "taxi": ("If I have a passenger I drive straight to the airport. If I don't, I check the road to the city: "
+             "when the traffic is heavy I go to the village instead, and when it is clear I go to the city."),
+    "highway": ("If there is a car close in front of me, I move to the left lane when it is free and slow down "
+                "when it is not. If the road ahead is clear, I speed up."),
+}
+
+
+def show_tree(console: Console, title: str, tree_json: dict, domain: str) -> None:
+    vocab = get_domain(domain).vocab
+    try:
+        body = to_text(parse_tree(tree_json, vocab), vocab)
+    except TreeError:  # a learned raw threshold test that no question of the domain matches
+        body = json.dumps(tree_json, indent=2)
+    console.print(Panel(body, title=title, expand=False))
+
+
+def run_pipeline(console: Console, err: Console, domain: str, text: str, steps: int, seed: int, out: Path) -> dict:
+    from nl2policy.cli import progress_bar
+    from nl2policy.language.translate import translate
+    from nl2policy.policy.optimize import optimize_tree
+
+    console.print(Panel(text, title=f"description ({domain})", expand=False))
+    translation = translate(domain, text)
+    tree: Tree = translation.tree
+    show_tree(console, f"translated tree · confidence {translation.confidence:.0%}", json.loads(json.dumps(translation.to_json()["tree"])), domain)
+    for warning in translation.warnings:
+        err.print(f"[yellow]warning:[/] {warning}")
+    with progress_bar() as bar:
+        task = bar.add_task(f"{domain}: PPO from the tree", total=steps)
+        summary = optimize_tree(domain, tree, steps, seed, out, progress=lambda n, total: bar.update(task, completed=n))
+    final = json.loads((out / "final_tree.json").read_text())
+    show_tree(console, "after PPO (discretized)", final, domain)
+    table = Table(title=f"mean return over {summary['eval_episodes']} evaluation episodes")
+    table.add_column("policy")
+    table.add_column("mean return", justify="right")
+    table.add_row("translated tree", f"{summary['initial_mean_return']:.2f}")
+    table.add_row("trained DDT (soft)", f"{summary['final_soft_ddt_return']:.2f}")
+    table.add_row("trained tree (discretized)", f"{summary['final_mean_return']:.2f}")
+    if domain == "taxi":
+        from nl2policy.domains.taxi import TaxiModel, optimal_policy
+
+        table.add_row("optimal (value iteration)", f"{optimal_policy(TaxiModel())[0]:.2f}")
+    console.print(table)
+    console.print(f"files in {out}: initial_tree.json, final_tree.json, curve.csv, curve.png, summary.json")
+    return summary
