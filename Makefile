@@ -23,7 +23,7 @@ $(STAMP): pyproject.toml requirements.lock
 	touch $(STAMP)
 
 demo: setup            ## the main job on embedded defaults
-	$(BIN)/nl2policy demo
+	$(BIN)/nl2policy run --domain taxi
 
 test: setup            ## the test suite (CI runs this)
 	$(BIN)/python -m pytest

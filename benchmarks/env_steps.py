@@ -3,8 +3,9 @@ wraps, measured side by side in one run so the wrapper's overhead shows as a rat
 
     .venv/bin/python benchmarks/env_steps.py [--steps 600] [--repeats 3]
 
-Each env is stepped with the same seeded random actions; the best of `repeats` timings is
-kept (the least disturbed by other work on the machine).
+Each env is stepped with the same seeded random actions. The two highway envs are timed in
+alternating short rounds on identical episodes (same seed, same actions), and the ratio is the
+median of the per-round ratios, so load from other processes hits both sides alike.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=600)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=15, help="paired highway rounds for the ratio")
     args = parser.parse_args()
     envs = {
         "taxi (nl2policy/Taxi-v0)": (make_env("taxi"), lambda a: a),
@@ -48,9 +50,15 @@ def main() -> None:
             best[name] = max(best.get(name, 0.0), steps_per_second(env, steps, seed=r, map_action=mapping))
     for name, sps in best.items():
         print(f"{name:45s} {sps:10.1f} steps/s")
-    raw, ours = best["highway raw (highway-fast-v0, same config)"], best["highway features (nl2policy/Highway-v0)"]
-    print(f"feature wrapper cost: our highway env runs at {ours / raw:.3f}x the raw step rate "
-          f"({100 * (raw / ours - 1):+.1f}% time per step)")
+    (raw_env, raw_map), (our_env, our_map) = envs["highway raw (highway-fast-v0, same config)"], envs["highway features (nl2policy/Highway-v0)"]
+    ratios = []
+    for r in range(args.rounds):
+        raw = steps_per_second(raw_env, 60, seed=100 + r, map_action=raw_map)
+        ours = steps_per_second(our_env, 60, seed=100 + r, map_action=our_map)
+        ratios.append(ours / raw)
+    q1, med, q3 = np.percentile(ratios, [25, 50, 75])
+    print(f"feature wrapper cost ({args.rounds} paired rounds of 60 steps): our highway env runs at "
+          f"{med:.3f}x the raw step rate (IQR {q1:.3f}-{q3:.3f}; {100 * (1 / med - 1):+.1f}% time per step)")
 
 
 if __name__ == "__main__":

@@ -152,3 +152,19 @@ def test_run_rejects_bad_trees_and_budgets(client):
     assert client.post("/api/runs", json={"domain": "taxi", "tree": {"do": "fly"}}).status_code == 422
     assert client.post("/api/runs", json={"domain": "taxi", "tree": {"do": "wait"}, "steps": 10**9}).status_code == 422
     assert client.post("/api/runs", json={"domain": "boat", "tree": {"do": "wait"}}).status_code == 404
+
+
+def test_baseline_curves_are_medians_over_seeds(tmp_path):
+    runs = tmp_path / "results" / "policy" / "taxi" / "runs"
+    for seed, level in enumerate((1.0, 2.0, 4.0)):
+        d = runs / f"mlp_s{seed}"
+        d.mkdir(parents=True)
+        rows = ["episode,step,return,rolling_mean_100"] + [f"{i},{i * 100},{level},{level * i / 10:.4f}" for i in range(1, 11)]
+        (d / "curve.csv").write_text("\n".join(rows) + "\n")
+    app = create_app(tmp_path / "a.sqlite", tmp_path, translator=fake_translator, results_dir=tmp_path / "results")
+    with TestClient(app) as c:
+        body = c.get("/api/baselines/taxi").json()
+        assert set(body["curves"]) == {"MLP"}
+        last_step, last_value = body["curves"]["MLP"][-1]
+        assert last_step == 1000 and abs(last_value - 2.0) < 1e-6  # median of 1, 2, 4
+        assert c.get("/api/baselines/boat").status_code == 404

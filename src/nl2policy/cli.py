@@ -60,11 +60,11 @@ def evaluate(
 
 
 @app.command()
-def demo(episodes: int = typer.Option(10, min=1), seed: int = typer.Option(0)) -> None:
-    """The main job on embedded defaults: a few corpus trees against random (and taxi's optimum)."""
-    from nl2policy.demo import run_demo
+def compare(episodes: int = typer.Option(10, min=1), seed: int = typer.Option(0)) -> None:
+    """The most common corpus trees against the random policy (and taxi's optimum), per domain."""
+    from nl2policy.compare import run_compare
 
-    run_demo(console, episodes, seed)
+    run_compare(console, episodes, seed)
 
 
 @app.command()

@@ -14,6 +14,7 @@ from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
+from nl2policy.app.baselines import baseline_curves
 from nl2policy.app.runs import RunManager, read_curve
 from nl2policy.app.store import Store
 from nl2policy.domains import DOMAINS, get_domain
@@ -216,8 +217,7 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
     @app.get("/api/baselines/{domain}")
     def baselines(domain: str) -> dict:
         _domain(domain)
-        path = results / "policy" / domain / "baseline_curves.json"
-        return json.loads(path.read_text()) if path.is_file() else {}
+        return baseline_curves(results, domain)
 
     # --- collect ----------------------------------------------------------------------------
     @app.post("/api/submissions", status_code=201)

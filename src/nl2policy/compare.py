@@ -1,4 +1,4 @@
-"""The README's main job on embedded defaults (grows with the project)."""
+"""Side by side in the terminal: the most common corpus trees, the random policy, taxi's optimum."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ def most_common_trees(domain: str, n: int):
     return [(parse_tree(key, vocab), c) for key, c in counts.most_common(n)]
 
 
-def run_demo(console: Console, episodes: int = 10, seed: int = 0, trees_per_domain: int = 3) -> None:
+def run_compare(console: Console, episodes: int = 10, seed: int = 0, trees_per_domain: int = 3) -> None:
     for domain in DOMAINS:
         vocab = get_domain(domain).vocab
         table = Table(title=f"{domain}: mean return over {episodes} seeded episodes (seed {seed})")
