@@ -1,0 +1,65 @@
+"""How long the default translator takes to train for one domain (budget: 5 minutes) and to
+translate one description (budget: 20 ms), on this machine.
+
+Trains into a temporary NL2POLICY_HOME so a user's saved model is not touched.
+Run: .venv/bin/python benchmarks/translator_speed.py [--domain taxi] [--threads 1] [--out FILE]
+One torch thread by default: the machine has 2 cores and other work may hold the other one;
+the load average (printed) says how busy the machine was.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import tempfile
+import time
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--domain", default="taxi")
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--out", default=None, help="Also write the report to this file")
+    parser.add_argument("--model", default=None)
+    args = parser.parse_args()
+    os.environ["NL2POLICY_HOME"] = tempfile.mkdtemp(prefix="nl2policy-bench-")
+    import torch
+
+    torch.set_num_threads(args.threads)
+    from nl2policy.language.corpus import load_corpus
+    from nl2policy.language.models.config import DEFAULT_MODEL
+    from nl2policy.language.translate import get_model, train_default, translate
+
+    name = args.model or DEFAULT_MODEL
+    load_start = os.getloadavg()[0]
+    start = time.perf_counter()
+    train_default(args.domain, name)
+    train_s = time.perf_counter() - start
+    get_model(args.domain, name)
+    specs = load_corpus(args.domain)
+    translate(args.domain, "warm-up: " + specs[0].description, name)  # loads MiniLM; not a measured text
+    latencies, words = [], []
+    for spec in specs:
+        t0 = time.perf_counter()
+        translate(args.domain, spec.description, name)
+        latencies.append(1000 * (time.perf_counter() - t0))
+        words.append(len(spec.description.split()))
+    latencies.sort()
+    median = statistics.median(latencies)
+    p90 = latencies[int(0.9 * len(latencies))]
+    lines = [f"command: .venv/bin/python benchmarks/translator_speed.py --domain {args.domain} --threads {args.threads}",
+             f"model {name}, domain {args.domain}, {args.threads} torch threads, {os.cpu_count()} cores, "
+             f"load average (1 min) at start {load_start:.1f}, at end {os.getloadavg()[0]:.1f}",
+             f"training time: {train_s:.1f} s (budget 300 s) -> {'OK' if train_s < 300 else 'OVER'}",
+             f"translation latency over {len(specs)} corpus descriptions (mean {statistics.mean(words):.0f} words), "
+             f"model loaded, each text new to the MiniLM cache: median {median:.1f} ms, p90 {p90:.1f} ms, "
+             f"max {latencies[-1]:.1f} ms (budget 20 ms) -> {'OK' if median < 20 else 'OVER'}"]
+    print("\n".join(lines))
+    if args.out:
+        with open(args.out, "w") as fh:
+            fh.write("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()

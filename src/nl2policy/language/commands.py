@@ -1,0 +1,135 @@
+"""CLI commands of the language area: train-translator, translate, translation-experiment."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    app.command("train-translator")(train_translator)
+    app.command("translate")(translate_cmd)
+    app.command("translation-experiment")(translation_experiment)
+
+
+def train_translator(
+    domain: str = typer.Option(..., help="taxi or highway"),
+    model: Optional[str] = typer.Option(None, help="Model name (default: the best model)"),
+    seed: int = typer.Option(0),
+    out: Optional[Path] = typer.Option(None, help="Folder to save into (default: $NL2POLICY_HOME/models)"),
+) -> None:
+    """Train a translator on the whole shared corpus and save it as the domain's model (resumes
+    from its checkpoint if a run was interrupted)."""
+    from nl2policy.cli import domain_or_fail, err, fail, progress_bar
+    from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
+    from nl2policy.language.translate import train_default
+
+    domain_or_fail(domain)
+    name = model or DEFAULT_MODEL
+    if name not in MODELS:
+        fail(f"unknown model {name!r}; known: {', '.join(MODELS)}")
+    with progress_bar() as bar:
+        task = bar.add_task(f"training {name} for {domain}", total=None)
+        path = train_default(domain, name, seed, progress=lambda done, total: bar.update(task, completed=done, total=total), out=out)
+    err.print(f"saved {path}")
+
+
+def translate_cmd(
+    text: Optional[str] = typer.Argument(None, help="The description to translate"),
+    domain: str = typer.Option(..., help="taxi or highway"),
+    json_out: bool = typer.Option(False, "--json", help='Print {"tree", "confidence", "warnings"} as JSON'),
+    jsonl: Optional[Path] = typer.Option(None, "--jsonl", help="File with one JSON object per line holding a description"),
+    model: Optional[str] = typer.Option(None, help="Model name (default: the best model)"),
+) -> None:
+    """Translate a description into a policy tree with its confidence."""
+    from nl2policy.cli import console, domain_or_fail, err, fail
+    from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
+    from nl2policy.language.translate import EmptyDescription, get_model, translate
+    from nl2policy.trees import to_text
+
+    d = domain_or_fail(domain)
+    name = model or DEFAULT_MODEL
+    if name not in MODELS:
+        fail(f"unknown model {name!r}; known: {', '.join(MODELS)}")
+    if jsonl is not None:
+        if text is not None:
+            fail("give either a TEXT argument or --jsonl FILE, not both")
+        if not jsonl.is_file():
+            fail(f"no such file: {jsonl}")
+        get_model(domain, name)
+        for lineno, line in enumerate(jsonl.read_text().splitlines(), 1):
+            print(json.dumps(_jsonl_line(domain, name, line, lineno)), flush=True)
+        return
+    if text is None:
+        fail("give a description to translate (or --jsonl FILE)")
+    try:
+        result = translate(domain, text, name)
+    except EmptyDescription as exc:
+        fail(str(exc))
+    if json_out:
+        print(json.dumps(result.to_json()))
+        return
+    console.print(to_text(result.tree, d.vocab), highlight=False)
+    console.print(f"confidence: {result.confidence:.2f}", highlight=False)
+    for w in result.warnings:
+        err.print(f"[yellow]warning:[/] {w}", highlight=False)
+
+
+def _jsonl_line(domain: str, name: str, line: str, lineno: int) -> dict:
+    """One output object per input line: the translation, or {"error": why}."""
+    from nl2policy.language.translate import EmptyDescription, translate
+
+    try:
+        row = json.loads(line)
+    except json.JSONDecodeError as exc:
+        return {"error": f"line {lineno}: not valid JSON ({exc.msg})"}
+    if not isinstance(row, dict) or "description" not in row:
+        return {"error": f"line {lineno}: no 'description' field"}
+    if not isinstance(row["description"], str):
+        return {"error": f"line {lineno}: 'description' must be a string"}
+    try:
+        return translate(domain, row["description"], name).to_json()
+    except EmptyDescription as exc:
+        return {"error": f"line {lineno}: {exc}"}
+
+
+DEFAULT_PLAN = "best:cv1,writers;han2tree:cv1,writers;seq2tree-minilm:cv1,writers;seq2seq:cv1;seq2tree:cv1"
+
+
+def translation_experiment(
+    domain: list[str] = typer.Option(["taxi", "highway"], help="Domains"),
+    plan: str = typer.Option(DEFAULT_PLAN, help="model:protocols;... with cvR = R repeats of 5-fold CV, writers = leave-writers-out; "
+                                               "'best' = the default model, 'ablation' = it without synthetic data"),
+    out: Path = typer.Option(Path("results/translation"), help="Folder for runs.jsonl, translation.md/.json/.png"),
+    summarize_only: bool = typer.Option(False, help="Only rewrite the tables from the folds already in runs.jsonl"),
+) -> None:
+    """Cross-validation and leave-writers-out accuracy of every translator (resumable)."""
+    import torch
+
+    from nl2policy.cli import console, domain_or_fail, err
+    from nl2policy.language.evaluate import run_experiment, summarize
+    from nl2policy.language.models.config import DEFAULT_MODEL
+
+    torch.set_num_threads(1)
+    for d in domain:
+        domain_or_fail(d)
+    alias = {"best": DEFAULT_MODEL, "ablation": DEFAULT_MODEL.replace("-synth", "")}
+    steps = []
+    for part in plan.split(";"):
+        name, protocols = part.split(":")
+        name = alias.get(name, name)
+        for p in protocols.split(","):
+            protocol, repeats = ("cv", int(p[2:] or 1)) if p.startswith("cv") else ("writers", 1)
+            steps += [(d, name, protocol, repeats) for d in domain]
+    # run in plan order (most important first): the experiment resumes, so what finished is kept
+    command = "nl2policy translation-experiment " + " ".join(f"--domain {d}" for d in domain) + f" --plan '{plan}' --out {out}"
+    if not summarize_only:
+        run_experiment(steps, out, progress=lambda msg: err.print(f"fold: {msg}", highlight=False))
+    md = summarize(out, command, "one CPU thread; model seed = CV repeat index; augmentation/synthetic seed 0; "
+                                 "epochs and data per model in nl2policy/language/models/config.py",
+                   planned=[(d, name, protocol, 5 * repeats if protocol == "cv" else 4) for d, name, protocol, repeats in steps])
+    console.print(md.read_text())

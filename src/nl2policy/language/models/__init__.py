@@ -1,0 +1,13 @@
+"""The translators: one encoder-decoder family whose parts reproduce the paper's models.
+
+Seq2Seq = flat BiGRU encoder + sequential decoder over the pre-order tree tokens;
+Seq2Tree = same encoder + binary tree decoder (each node decoded from its parent's state);
+Seq2Tree+MiniLM = Seq2Tree whose word inputs are fused with frozen MiniLM layers (ELMo-style);
+HAN2Tree = hierarchical (word, sentence) attention encoder + tree decoder;
+seq2tree-minilm-synth (the default) = Seq2Tree+MiniLM trained with synthetic pairs as well.
+Configurations live in `config.py`; the network in `network.py`.
+"""
+
+from nl2policy.language.models.config import MODELS, ModelConfig
+
+__all__ = ["MODELS", "ModelConfig"]

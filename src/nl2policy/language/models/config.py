@@ -1,0 +1,39 @@
+"""Named model configurations: which encoder, decoder, inputs and training data."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    encoder: str  # "flat" (BiGRU over all words) or "han" (words per sentence, then sentences)
+    decoder: str  # "seq" (state follows the previous token) or "tree" (state from the parent node)
+    minilm: bool  # fuse frozen MiniLM layers into the word inputs
+    synthetic: int  # synthetic random-tree pairs added to training (0 = none)
+    word_rnn: bool = True  # BiGRU over words; off for MiniLM inputs, which are already contextual
+    aug_copies: int = 1  # augmented copies of each training description
+    epochs: int = 10
+    hidden: int = 64
+    embed: int = 48
+    lr: float = 3e-3
+    batch: int = 32
+    dropout: float = 0.3
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+MODELS: dict[str, ModelConfig] = {
+    "seq2seq": ModelConfig("flat", "seq", False, 0),
+    "seq2tree": ModelConfig("flat", "tree", False, 0),
+    "seq2tree-minilm": ModelConfig("flat", "tree", True, 0),
+    "han2tree": ModelConfig("han", "tree", False, 0),
+    "seq2tree-minilm-synth": ModelConfig("flat", "tree", True, 200),  # the default: + synthetic pairs
+    # path-conditioned node classifier over frozen MiniLM states (models/pathnet.py); experimental:
+    # in a one-fold exploratory check it was well below the default, so it is not the default
+    "pathnet-minilm": ModelConfig("flat", "path", True, 0, epochs=30, hidden=96, lr=2e-3, batch=16),
+    # tiny and quick, for smoke tests of the plumbing (CLI, saving, loading); not a translator to use
+    "smoke": ModelConfig("flat", "tree", False, 0, aug_copies=0, epochs=1, hidden=16, embed=16, batch=64),
+}
+DEFAULT_MODEL = "seq2tree-minilm-synth"

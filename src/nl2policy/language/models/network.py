@@ -1,0 +1,193 @@
+"""The encoder-decoder network shared by all translators (see models/__init__.py).
+
+Training is teacher-forced over the gold pre-order tokens; each step's softmax is taken only
+over the tokens the grammar allows there, in training and decoding alike, so the model never
+spends probability on invalid trees and its sequence probability is a usable confidence.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
+
+from nl2policy.language.models.config import ModelConfig
+from nl2policy.language.models.pathnet import PathDecoder
+from nl2policy.language.models.pretrained import DIM as MINILM_DIM, LAYERS as MINILM_LAYERS
+
+MAX_SENT_POS = 24
+
+
+@dataclass
+class Batch:
+    """Padded inputs. `words` (B, N) token ids; `sent_index` (B, S, W) positions into the
+    N axis (N = padding) for the hierarchical encoder."""
+
+    words: torch.Tensor
+    lengths: torch.Tensor
+    mini: Optional[torch.Tensor]  # (B, layers, N, 384) frozen MiniLM states, or None
+    sent_index: torch.Tensor
+    sent_lengths: torch.Tensor  # (B, S) words per sentence (0 = padding sentence)
+    sent_ids: torch.Tensor  # (B, N) sentence number of each word
+    n_sents: torch.Tensor  # (B,)
+
+
+def _bigru_packed(gru: nn.GRU, x: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+    packed = pack_padded_sequence(x, lengths.clamp(min=1).cpu(), batch_first=True, enforce_sorted=False)
+    out, _ = gru(packed)
+    out, _ = pad_packed_sequence(out, batch_first=True, total_length=x.shape[1])
+    return out
+
+
+def _pad1(x: torch.Tensor) -> torch.Tensor:
+    """Append one zero position on axis 1, the target of padding indices."""
+    return torch.cat([x, x.new_zeros(x.shape[0], 1, *x.shape[2:])], 1)
+
+
+def _masked_mean(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    m = mask.unsqueeze(-1).float()
+    return (x * m).sum(1) / m.sum(1).clamp(min=1)
+
+
+class Translator(nn.Module):
+    def __init__(self, cfg: ModelConfig, n_words: int, n_tree_tokens: int, n_questions: int = 0) -> None:
+        super().__init__()
+        self.cfg = cfg
+        h, e = cfg.hidden, cfg.embed
+        self.word_emb = nn.Embedding(n_words, e, padding_idx=0)
+        in_dim = e
+        if cfg.minilm:  # ELMo-style: softmax-weighted sum of layers, scaled by gamma
+            self.mix_logits = nn.Parameter(torch.zeros(MINILM_LAYERS + 1))
+            self.mix_gamma = nn.Parameter(torch.ones(()))
+            self.mini_norm = nn.LayerNorm(MINILM_DIM)  # BERT states have a few huge dimensions
+            self.mini_proj = nn.Linear(MINILM_DIM, 2 * e)
+            in_dim += 2 * e
+        self.drop = nn.Dropout(cfg.dropout)
+        if cfg.word_rnn:
+            self.word_gru = nn.GRU(in_dim, h, batch_first=True, bidirectional=True)
+        else:  # MiniLM states are already contextual: a width-3 convolution is enough, and 5x faster
+            self.word_ff = nn.Conv1d(in_dim, 2 * h, kernel_size=3, padding=1)
+            self.sent_pos = nn.Embedding(MAX_SENT_POS, 2 * h)  # which sentence a word is in: order for attention
+        mem = 2 * h
+        if cfg.encoder == "han":
+            self.word_att = nn.Linear(mem, 1)
+            self.sent_gru = nn.GRU(mem, h, batch_first=True, bidirectional=True)
+            self.sent_att = nn.Linear(h, mem, bias=False)
+            ctx_dim = 2 * mem
+        else:
+            ctx_dim = mem
+        self.init = nn.Linear(mem, h)
+        if cfg.decoder == "path":  # the path-conditioned node classifier (pathnet.py) reads the word states only
+            self.path = PathDecoder(n_questions, n_tree_tokens, mem, h, cfg.dropout)
+            return
+        self.tok_emb = nn.Embedding(n_tree_tokens + 1, e)  # last id: the root's "start"
+        self.branch_emb = nn.Embedding(3, e)
+        self.cell = nn.GRUCell(3 * e + h + ctx_dim, h)  # [previous token, parent token, branch, parent state, last context]
+        self.word_query = nn.Linear(h, mem, bias=False)
+        self.out = nn.Linear(h + ctx_dim, h)
+        self.logits = nn.Linear(h, n_tree_tokens)
+        self.start_id = n_tree_tokens
+
+    # ---- encoder -------------------------------------------------------------------------
+    def _inputs(self, b: Batch) -> torch.Tensor:
+        x = self.word_emb(b.words)
+        if self.cfg.minilm:
+            weights = torch.softmax(self.mix_logits, 0)
+            mixed = torch.einsum("l,blnd->bnd", weights, b.mini)
+            x = torch.cat([x, self.mini_proj(self.mix_gamma * self.mini_norm(mixed))], -1)
+        return self.drop(x)
+
+    def _words(self, x: torch.Tensor, lengths: torch.Tensor, sent_ids: Optional[torch.Tensor] = None) -> torch.Tensor:
+        if self.cfg.word_rnn:
+            return _bigru_packed(self.word_gru, x, lengths)
+        return torch.tanh(self.word_ff(x.transpose(1, 2)).transpose(1, 2) + self.sent_pos(sent_ids.clamp(max=MAX_SENT_POS - 1)))
+
+    def encode(self, b: Batch) -> dict:
+        x = self._inputs(b)
+        mask = b.words != 0
+        if self.cfg.encoder == "flat":
+            states = self.drop(self._words(x, b.lengths, b.sent_ids))
+            return {"words": states, "mask": mask, "h0": torch.tanh(self.init(_masked_mean(states, mask)))}
+        B, S, W = b.sent_index.shape
+        grid_index = b.sent_index.view(B, S * W, 1)
+        word_mask = torch.arange(W)[None, None] < b.sent_lengths[..., None]  # (B, S, W)
+        if self.cfg.word_rnn:  # one BiGRU pass per sentence, then back to the flat word axis
+            xs = torch.gather(_pad1(x), 1, grid_index.expand(-1, -1, x.shape[-1])).view(B * S, W, -1)
+            grid = _bigru_packed(self.word_gru, xs, b.sent_lengths.view(-1)).view(B, S * W, -1)
+            flat = torch.zeros(B, x.shape[1] + 1, grid.shape[-1]).scatter(1, grid_index.expand(-1, -1, grid.shape[-1]), grid)
+            states = flat[:, :-1]
+        else:
+            states = self._words(x, b.lengths, b.sent_ids)
+            grid = torch.gather(_pad1(states), 1, grid_index.expand(-1, -1, states.shape[-1]))
+        states = self.drop(states)
+        grid = self.drop(grid).view(B, S, W, -1)
+        att = self.word_att(grid).squeeze(-1).masked_fill(~word_mask, -1e9)
+        sent_vec = (torch.softmax(att, -1).unsqueeze(-1) * grid).sum(2)
+        sent_states = self.drop(_bigru_packed(self.sent_gru, sent_vec, b.n_sents))
+        sent_mask = torch.arange(S)[None] < b.n_sents[:, None]
+        return {"words": states, "mask": mask, "grid_index": b.sent_index, "word_mask": word_mask,
+                "sents": sent_states, "sent_mask": sent_mask,
+                "h0": torch.tanh(self.init(_masked_mean(sent_states, sent_mask)))}
+
+    def attend(self, memory: dict, h: torch.Tensor) -> torch.Tensor:
+        q = self.word_query(h)  # (B, mem)
+        words = memory["words"]
+        score = torch.einsum("bnd,bd->bn", words, q)
+        if self.cfg.encoder == "flat":
+            att = torch.softmax(score.masked_fill(~memory["mask"], -1e9), -1)
+            return torch.einsum("bn,bnd->bd", att, words)
+        # hierarchical: P(sentence) * P(word | sentence), normalised on the (sentence, word) grid
+        B, S, W = memory["grid_index"].shape
+        s_att = torch.softmax(torch.einsum("bsd,bd->bs", memory["sents"], q).masked_fill(~memory["sent_mask"], -1e9), -1)
+        grid_score = torch.gather(_pad1(score), 1, memory["grid_index"].view(B, -1)).view(B, S, W)
+        grid_att = torch.softmax(grid_score.masked_fill(~memory["word_mask"], -1e9), -1) * s_att[..., None]
+        flat_att = torch.zeros(B, words.shape[1] + 1).scatter_add(1, memory["grid_index"].view(B, -1), grid_att.view(B, -1))
+        return torch.cat([torch.einsum("bs,bsd->bd", s_att, memory["sents"]),
+                          torch.einsum("bn,bnd->bd", flat_att[:, :-1], words)], -1)
+
+    # ---- decoder -------------------------------------------------------------------------
+    def step(self, memory: dict, h_prev: torch.Tensor, ctx_prev: torch.Tensor, prev_tok: torch.Tensor,
+             h_parent: torch.Tensor, parent_tok: torch.Tensor, branch: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """One decoding step. Seq mode: the state runs on from the previous token only. Tree
+        mode: it also takes the parent node's token and state and which branch (yes/no) this
+        slot is, so each node is decoded knowing where in the tree it sits.
+        Returns (state, attention context, unmasked logits)."""
+        if self.cfg.decoder == "seq":
+            h_parent = torch.zeros_like(h_parent)
+            parent_tok = torch.full_like(parent_tok, self.start_id)
+            branch = torch.zeros_like(branch)
+        inp = torch.cat([self.tok_emb(prev_tok), self.tok_emb(parent_tok), self.branch_emb(branch), h_parent, ctx_prev], -1)
+        h = self.cell(self.drop(inp), h_prev)
+        ctx = self.attend(memory, h)
+        return h, ctx, self.logits(self.drop(torch.tanh(self.out(torch.cat([h, ctx], -1)))))
+
+    def run_step(self, memory: dict, hs: list, ctxs: list, toks: list, parent: torch.Tensor, branch: torch.Tensor):
+        """The next step given the states so far (hs[0] = h0, toks[0] = start); parent is the
+        parent's step index (-1 for the root)."""
+        rows = torch.arange(len(parent))
+        H, T = torch.stack(hs, 1), torch.stack(toks, 1)
+        src = parent + 1  # the root's parent is the start state
+        return self.step(memory, hs[-1], ctxs[-1], toks[-1], H[rows, src], T[rows, src], branch)
+
+    def loss(self, b: Batch, targets: torch.Tensor, parents: torch.Tensor, branches: torch.Tensor,
+             masks: torch.Tensor, steps: torch.Tensor) -> torch.Tensor:
+        """Teacher-forced NLL. targets/parents/branches (B, T); masks (B, T, V) allowed tokens;
+        steps (B, T) True on real steps."""
+        memory = self.encode(b)
+        B = targets.shape[0]
+        hs, toks = [memory["h0"]], [torch.full((B,), self.start_id, dtype=torch.long)]
+        ctxs = [torch.zeros(B, self.out.in_features - self.cfg.hidden)]
+        total = torch.zeros(())
+        for t in range(targets.shape[1]):
+            h, ctx, logits = self.run_step(memory, hs, ctxs, toks, parents[:, t], branches[:, t])
+            hs.append(h)
+            ctxs.append(ctx)
+            toks.append(targets[:, t])
+            logp = torch.log_softmax(logits.masked_fill(~masks[:, t], -1e9), -1)
+            nll = -logp.gather(1, targets[:, t:t + 1]).squeeze(1)
+            total = total + (nll * steps[:, t]).sum()
+        return total / steps.sum()

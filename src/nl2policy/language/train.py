@@ -1,0 +1,242 @@
+"""Turning (description, tree) pairs into tensors, the training loop, and constrained decoding.
+
+`fit` is the whole training loop in plain view (Adam, teacher forcing, a few epochs);
+`TrainedTranslator.predict` decodes greedily under the grammar mask, so every output is a
+valid tree, and returns each node's probability for the confidence score.
+"""
+
+from __future__ import annotations
+
+import random
+from dataclasses import dataclass, field
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+import torch
+
+from nl2policy.domains import get_domain
+from nl2policy.language.grammar import allowed_tokens, next_slot
+from nl2policy.language.models.config import ModelConfig
+from nl2policy.language.models.network import Batch, Translator
+from nl2policy.language.models.pathnet import decode_paths, tree_nodes
+from nl2policy.language.models.pretrained import MiniLMCache
+from nl2policy.language.text import WordVocab, split_sentences
+from nl2policy.trees import Tree, from_tokens, to_tokens
+
+MAX_STEPS = 15
+MAX_SENT_WORDS = 60
+
+
+@dataclass
+class Encoded:
+    """One description ready for the network."""
+
+    ids: list[int]
+    sent_lengths: list[int]
+    mini: Optional[torch.Tensor]
+
+
+@dataclass
+class TrainedTranslator:
+    domain: str
+    name: str
+    cfg: ModelConfig
+    words: WordVocab
+    net: Translator
+    cache: MiniLMCache = field(default_factory=MiniLMCache, repr=False)
+    history: list[float] = field(default_factory=list, repr=False)  # mean training loss per epoch
+
+    @property
+    def tree_tokens(self) -> list[str]:
+        vocab = get_domain(self.domain).vocab
+        return vocab.question_ids + vocab.action_ids
+
+    def encode(self, text: str) -> Encoded:
+        sentences = split_sentences(text) or [[]]
+        sentences = [s[:MAX_SENT_WORDS] for s in sentences if s] or []
+        flat = [t for s in sentences for t in s]
+        mini = torch.from_numpy(self.cache.get(text, flat)) if self.cfg.minilm and flat else None
+        if self.cfg.minilm and mini is None:
+            mini = torch.zeros(4, 0, 384, dtype=torch.float16)
+        return Encoded(self.words.encode(t.text for t in flat), [len(s) for s in sentences], mini)
+
+    @torch.inference_mode()
+    def predict(self, texts: Sequence[str], batch_size: int = 64) -> list[tuple[Tree, dict[int, float]]]:
+        """Greedy grammar-constrained decoding. Returns (tree, {grid slot: probability})."""
+        self.net.eval()
+        out = []
+        decode = self._decode_paths if self.cfg.decoder == "path" else self._decode
+        for i in range(0, len(texts), batch_size):
+            out += decode([self.encode(t) for t in texts[i:i + batch_size]])
+        return out
+
+    def _decode_paths(self, items: list[Encoded]) -> list[tuple[Tree, dict[int, float]]]:
+        vocab = get_domain(self.domain).vocab
+        memory = self.net.encode(collate(items))
+        decoded = decode_paths(self.net.path, memory["words"], memory["mask"], self.tree_tokens, len(vocab.question_ids))
+        return [(tree, dict(zip(_preorder_slots(tree), probs))) for tree, probs in decoded]
+
+    def _decode(self, items: list[Encoded]) -> list[tuple[Tree, dict[int, float]]]:
+        vocab = get_domain(self.domain).vocab
+        names = self.tree_tokens
+        index = {t: i for i, t in enumerate(names)}
+        memory = self.net.encode(collate(items))
+        B = len(items)
+        prefixes: list[list[str]] = [[] for _ in range(B)]
+        probs: list[dict[int, float]] = [{} for _ in range(B)]
+        hs, toks = [memory["h0"]], [torch.full((B,), self.net.start_id, dtype=torch.long)]
+        ctxs = [torch.zeros(B, self.net.out.in_features - self.cfg.hidden)]
+        for t in range(MAX_STEPS):
+            slots = [next_slot(p, vocab) for p in prefixes]
+            if all(s is None for s in slots):
+                break
+            mask = torch.zeros(B, len(names), dtype=torch.bool)
+            parent = torch.full((B,), -1, dtype=torch.long)
+            branch = torch.zeros(B, dtype=torch.long)
+            for b, s in enumerate(slots):
+                if s is None:
+                    mask[b, 0] = True  # finished: any token, ignored
+                    continue
+                mask[b, [index[a] for a in allowed_tokens(s, vocab)]] = True
+                parent[b], branch[b] = s.parent, s.branch
+            h, ctx, logits = self.net.run_step(memory, hs, ctxs, toks, parent, branch)
+            p = torch.softmax(logits.masked_fill(~mask, -1e9), -1)
+            choice = p.argmax(-1)
+            for b, s in enumerate(slots):
+                if s is not None:
+                    prefixes[b].append(names[choice[b]])
+                    probs[b][s.grid] = float(p[b, choice[b]])
+            hs.append(h)
+            ctxs.append(ctx)
+            toks.append(choice)
+        return [(from_tokens(pre, vocab), pr) for pre, pr in zip(prefixes, probs)]
+
+
+def _preorder_slots(tree: Tree, slot: int = 0) -> list[int]:
+    """Grid slots of a tree's nodes in pre-order."""
+    if not hasattr(tree, "question"):
+        return [slot]
+    return [slot] + _preorder_slots(tree.yes, 2 * slot + 1) + _preorder_slots(tree.no, 2 * slot + 2)
+
+
+def path_loss(net: Translator, batch: Batch, nodes: list[list[tuple[tuple, int]]], n_labels: int) -> torch.Tensor:
+    """Mean cross-entropy over every node of every tree in the batch (path decoder)."""
+    memory = net.encode(batch)
+    doc = [b for b, ns in enumerate(nodes) for _ in ns]
+    flat = [n for ns in nodes for n in ns]
+    node_batch = net.path.node_batch(doc, [p for p, _ in flat], n_labels)
+    logits = net.path(memory["words"], memory["mask"], node_batch)
+    return torch.nn.functional.cross_entropy(logits, torch.tensor([y for _, y in flat]))
+
+
+def collate(items: Sequence[Encoded]) -> Batch:
+    B = len(items)
+    N = max(1, max(len(e.ids) for e in items))
+    S = max(1, max(len(e.sent_lengths) for e in items))
+    W = max([1] + [l for e in items for l in e.sent_lengths])
+    words = torch.zeros(B, N, dtype=torch.long)
+    sent_index = torch.full((B, S, W), N, dtype=torch.long)
+    sent_lengths = torch.zeros(B, S, dtype=torch.long)
+    sent_ids = torch.zeros(B, N, dtype=torch.long)
+    for b, e in enumerate(items):
+        words[b, : len(e.ids)] = torch.tensor(e.ids, dtype=torch.long)
+        pos = 0
+        for s, n in enumerate(e.sent_lengths):
+            sent_index[b, s, :n] = torch.arange(pos, pos + n)
+            sent_lengths[b, s] = n
+            sent_ids[b, pos:pos + n] = s
+            pos += n
+    minis = None
+    if items[0].mini is not None:
+        minis = torch.zeros(B, items[0].mini.shape[0], N, items[0].mini.shape[2])
+        for b, e in enumerate(items):
+            minis[b, :, : e.mini.shape[1]] = e.mini.float()
+    return Batch(words, torch.tensor([max(1, len(e.ids)) for e in items]), minis, sent_index, sent_lengths, sent_ids,
+                 torch.tensor([max(1, len(e.sent_lengths)) for e in items]))
+
+
+def gold_steps(tree: Tree, domain: str, names: list[str]) -> tuple[list[int], list[int], list[int], list[list[bool]]]:
+    """Targets, parent positions, branches and allowed-token masks along a gold tree."""
+    vocab = get_domain(domain).vocab
+    tokens = to_tokens(tree)
+    targets, parents, branches, masks = [], [], [], []
+    for t, tok in enumerate(tokens):
+        slot = next_slot(tokens[:t], vocab)
+        allowed = set(allowed_tokens(slot, vocab))
+        targets.append(names.index(tok))
+        parents.append(slot.parent)
+        branches.append(slot.branch)
+        masks.append([n in allowed for n in names])
+    return targets, parents, branches, masks
+
+
+def _targets(golds: list, n_names: int) -> tuple[torch.Tensor, ...]:
+    B, T = len(golds), max(len(g[0]) for g in golds)
+    targets = torch.zeros(B, T, dtype=torch.long)
+    parents = torch.full((B, T), -1, dtype=torch.long)
+    branches = torch.zeros(B, T, dtype=torch.long)
+    masks = torch.ones(B, T, n_names, dtype=torch.bool)
+    steps = torch.zeros(B, T)
+    for b, (tg, pa, br, mk) in enumerate(golds):
+        n = len(tg)
+        targets[b, :n], parents[b, :n], branches[b, :n] = torch.tensor(tg), torch.tensor(pa), torch.tensor(br)
+        masks[b, :n] = torch.tensor(mk)
+        steps[b, :n] = 1
+    return targets, parents, branches, masks, steps
+
+
+def fit(domain: str, name: str, cfg: ModelConfig, pairs: Sequence[tuple[str, Tree]], seed: int = 0,
+        cache: Optional[MiniLMCache] = None, progress: Optional[Callable[[int, int], None]] = None,
+        vocab_texts: Optional[Sequence[str]] = None, state: Optional[dict] = None,
+        on_epoch: Optional[Callable[[int, "TrainedTranslator", torch.optim.Optimizer], None]] = None) -> TrainedTranslator:
+    """Train a translator on (description, tree) pairs. The word vocabulary comes from
+    `vocab_texts` (the real training descriptions) or the pairs; `state` resumes a checkpoint."""
+    torch.manual_seed(seed)
+    rng = random.Random(seed)
+    words = WordVocab.build(vocab_texts if vocab_texts is not None else [t for t, _ in pairs])
+    vocab = get_domain(domain).vocab
+    names = vocab.question_ids + vocab.action_ids
+    net = Translator(cfg, len(words), len(names), len(vocab.question_ids))
+    model = TrainedTranslator(domain, name, cfg, words, net, cache or MiniLMCache())
+    opt = torch.optim.Adam(model.net.parameters(), lr=cfg.lr)
+    start_epoch = 0
+    if state is not None:
+        model.net.load_state_dict(state["net"])
+        opt.load_state_dict(state["opt"])
+        start_epoch = state["epoch"]
+        rng.setstate(state["rng"])
+    encoded = [model.encode(t) for t, _ in pairs]
+    if cfg.decoder == "path":
+        golds = [tree_nodes(tree, names, vocab.question_ids) for _, tree in pairs]
+    else:
+        golds = [gold_steps(tree, domain, names) for _, tree in pairs]
+    order = list(range(len(pairs)))
+    batches_per_epoch = (len(order) + cfg.batch - 1) // cfg.batch
+    for epoch in range(start_epoch, cfg.epochs):
+        model.net.train()
+        rng.shuffle(order)
+        losses = []
+        for k in range(batches_per_epoch):
+            idx = order[k * cfg.batch:(k + 1) * cfg.batch]
+            batch = collate([_word_dropout(encoded[i], rng) for i in idx])
+            if cfg.decoder == "path":
+                loss = path_loss(model.net, batch, [golds[i] for i in idx], len(names))
+            else:
+                loss = model.net.loss(batch, *_targets([golds[i] for i in idx], len(names)))
+            opt.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.net.parameters(), 5.0)
+            opt.step()
+            losses.append(loss.item())
+            if progress:
+                progress(epoch * batches_per_epoch + k + 1, cfg.epochs * batches_per_epoch)
+        model.history.append(sum(losses) / len(losses))
+        if on_epoch:
+            on_epoch(epoch + 1, model, opt, rng)
+    model.net.eval()
+    return model
+
+
+def _word_dropout(e: Encoded, rng: random.Random, p: float = 0.1) -> Encoded:
+    """Replace a few word ids by <unk> so the model also reads the unknown words of new writers."""
+    return Encoded([1 if rng.random() < p else i for i in e.ids], e.sent_lengths, e.mini)

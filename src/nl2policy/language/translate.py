@@ -1,0 +1,199 @@
+"""The translator as a product: load (or first train) a domain's default model, translate one
+description into a valid tree with a confidence and warnings.
+
+A description that is empty raises `EmptyDescription`; one that is off-topic or about the
+other domain still gets a (valid) tree, but with a low confidence and a warning saying why,
+so no caller mistakes it for a confident answer.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections import Counter
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Callable, Optional
+
+import torch
+
+from nl2policy.domains import DOMAINS, get_domain
+from nl2policy.language.corpus import load_corpus
+from nl2policy.language.models.config import DEFAULT_MODEL, MODELS, ModelConfig
+from nl2policy.language.models.network import Translator
+from nl2policy.language.models.pretrained import MiniLMCache
+from nl2policy.language.text import WordVocab, tokenize
+from nl2policy.language.train import TrainedTranslator, fit
+from nl2policy.trees import Tree, tree_to_json
+
+LOW_CONFIDENCE = 0.5
+STOPWORDS = set("the a an to of and or if is it in on at for be i you my your we this that there not no yes then".split())
+
+
+class EmptyDescription(ValueError):
+    """The description has no words to translate."""
+
+
+@dataclass
+class Translation:
+    tree: Tree
+    confidence: float
+    warnings: list[str] = field(default_factory=list)
+    node_confidence: dict[int, float] = field(default_factory=dict)  # grid slot -> probability
+
+    def to_json(self) -> dict:
+        return {"tree": tree_to_json(self.tree), "confidence": round(self.confidence, 4), "warnings": list(self.warnings)}
+
+
+SHIPPED_DIR = Path(__file__).resolve().parent.parent / "data" / "models"
+"""Trained default models that ship with the package (see its README.md for the command)."""
+
+
+def model_dir() -> Path:
+    """The user's models: $NL2POLICY_HOME/models (default: the platform's user data dir)."""
+    from nl2policy.paths import home
+
+    return home() / "models"
+
+
+def model_path(domain: str, name: str = DEFAULT_MODEL, folder: Optional[Path] = None) -> Path:
+    return (folder or model_dir()) / f"{domain}-{name}.pt"
+
+
+def find_model(domain: str, name: str = DEFAULT_MODEL) -> Optional[Path]:
+    """The user's trained model if there is one, else the shipped one, else None."""
+    for folder in (model_dir(), SHIPPED_DIR):
+        path = model_path(domain, name, folder)
+        if path.is_file():
+            return path
+    return None
+
+
+def training_pairs(domain: str, cfg: ModelConfig, seed: int = 0) -> tuple[list, list[str]]:
+    """The whole shared corpus, its augmented copies and the synthetic pairs; plus the texts
+    the word vocabulary is built from (the real descriptions)."""
+    from nl2policy.language.augment import augment_fold
+    from nl2policy.language.synthetic import synthetic_pairs
+
+    specs = load_corpus(domain)
+    idx = list(range(len(specs)))
+    pairs = [(s.description, s.tree) for s in specs] + augment_fold(specs, idx, cfg.aug_copies, seed)
+    if cfg.synthetic:
+        pairs += synthetic_pairs(domain, cfg.synthetic, seed, [s.tree for s in specs])
+    return pairs, [s.description for s in specs]
+
+
+def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
+                  progress: Optional[Callable[[int, int], None]] = None, out: Optional[Path] = None) -> Path:
+    """Train on the whole shared corpus and save into `out` (default: the user's model folder);
+    resumes from `<model>.ckpt` if one exists. The file holds the config and word vocabulary
+    too, so loading it needs nothing else."""
+    get_domain(domain)
+    if name not in MODELS:
+        raise KeyError(f"unknown model {name!r}; known: {', '.join(MODELS)}")
+    cfg = MODELS[name]
+    path = model_path(domain, name, out)
+    ckpt = path.with_suffix(".ckpt")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    state = torch.load(ckpt, weights_only=False) if ckpt.is_file() else None
+    pairs, vocab_texts = training_pairs(domain, cfg, seed)
+
+    def save_checkpoint(epoch: int, model: TrainedTranslator, opt, rng) -> None:
+        tmp = ckpt.with_suffix(".tmp")
+        torch.save({"epoch": epoch, "net": model.net.state_dict(), "opt": opt.state_dict(), "rng": rng.getstate()}, tmp)
+        tmp.replace(ckpt)
+
+    model = fit(domain, name, cfg, pairs, seed, progress=progress, vocab_texts=vocab_texts, state=state, on_epoch=save_checkpoint)
+    tmp = path.with_suffix(".tmp")
+    torch.save({"domain": domain, "name": name, "cfg": cfg.to_dict(), "words": model.words.itos[2:],
+                "net": model.net.state_dict(), "lexicon": topic_lexicon(domain)}, tmp)
+    tmp.replace(path)
+    ckpt.unlink(missing_ok=True)
+    return path
+
+
+def topic_lexicon(domain: str) -> dict[str, list[str]]:
+    """Words typical of each domain's descriptions (in >= 5 of its specs, >= 4x as often as
+    in the other domain's): the on-topic detector's evidence."""
+    df = {d: Counter(w for s in load_corpus(d) for w in set(tokenize(s.description))) for d in DOMAINS}
+    out = {}
+    for d in DOMAINS:
+        others = Counter()
+        for o in DOMAINS:
+            if o != d:
+                others.update(df[o])
+        out[d] = sorted(w for w, c in df[d].items() if c >= 5 and (c + 1) / (others[w] + 1) >= 4 and w not in STOPWORDS)
+    return out
+
+
+@dataclass
+class LoadedModel:
+    translator: TrainedTranslator
+    lexicon: dict[str, set[str]]
+
+
+def load_model(path: Path) -> LoadedModel:
+    data = torch.load(path, weights_only=False)
+    cfg = ModelConfig(**data["cfg"])
+    words = WordVocab(data["words"])
+    vocab = get_domain(data["domain"]).vocab
+    net = Translator(cfg, len(words), len(vocab.question_ids) + len(vocab.action_ids), len(vocab.question_ids))
+    net.load_state_dict(data["net"])
+    net.eval()
+    return LoadedModel(TrainedTranslator(data["domain"], data["name"], cfg, words, net, MiniLMCache(max_items=256)),
+                       {d: set(ws) for d, ws in data["lexicon"].items()})
+
+
+_LOADED: dict[tuple[str, str], LoadedModel] = {}
+
+
+def get_model(domain: str, name: str = DEFAULT_MODEL) -> LoadedModel:
+    """The saved default model, training it first (progress on stderr) when there is none."""
+    key = (domain, name)
+    if key not in _LOADED:
+        path = find_model(domain, name)
+        if path is None:
+            path = model_path(domain, name)
+            print(f"No trained {name} translator for {domain} in {path.parent} or {SHIPPED_DIR}; "
+                  "training it now (a few minutes)...",
+                  file=sys.stderr)
+            last = [-1]
+
+            def report(done: int, total: int) -> None:
+                pct = 100 * done // total
+                if pct // 10 != last[0]:
+                    last[0] = pct // 10
+                    print(f"  training {domain} translator: {pct}%", file=sys.stderr)
+
+            train_default(domain, name, progress=report)
+        _LOADED[key] = load_model(path)
+    return _LOADED[key]
+
+
+def check_topic(domain: str, text: str, lexicon: dict[str, set[str]]) -> tuple[float, list[str]]:
+    """(factor to scale confidence by, warnings) from the domain words the text uses."""
+    words = tokenize(text)
+    hits = {d: sum(w in lex for w in words) for d, lex in lexicon.items()}
+    own = hits.get(domain, 0)
+    other, other_hits = max(((d, h) for d, h in hits.items() if d != domain), key=lambda x: x[1], default=(None, 0))
+    if own == 0 and other_hits == 0:
+        return 0.05, [f"off-topic: nothing in the description is about the {domain} domain"]
+    if other_hits > own:
+        return 0.1, [f"this reads like a description for the {other} domain, not {domain}"]
+    return 1.0, []
+
+
+def translate(domain: str, text: str, name: str = DEFAULT_MODEL) -> Translation:
+    """Translate one description into a valid tree of `domain`, with confidence and warnings."""
+    get_domain(domain)
+    if not isinstance(text, str) or not tokenize(text):
+        raise EmptyDescription("the description is empty: write what the policy should do")
+    loaded = get_model(domain, name)
+    tree, node_probs = loaded.translator.predict([text])[0]
+    seq_prob = math.prod(node_probs.values())
+    factor, warnings = check_topic(domain, text, loaded.lexicon)
+    confidence = max(0.0, min(1.0, seq_prob * factor))
+    if confidence < LOW_CONFIDENCE:
+        warnings.append(f"low confidence ({confidence:.2f}): check the tree before using it")
+    return Translation(tree, confidence, warnings, {k: v * factor for k, v in node_probs.items()})

@@ -1,0 +1,117 @@
+"""CLI commands of the policy area: ``optimize``, ``policy-experiment``, ``policy-fidelity``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    app.command("optimize")(optimize)
+    app.command("policy-experiment")(policy_experiment)
+    app.command("policy-fidelity")(policy_fidelity)
+
+
+def optimize(
+    domain: str = typer.Option(..., help="taxi or highway"),
+    tree: str = typer.Option(..., help="A tree as inline JSON or a path to a JSON file"),
+    steps: int = typer.Option(20_000, min=1, help="PPO env steps"),
+    seed: int = typer.Option(0),
+    out: Path = typer.Option(Path("runs/optimize"), help="Output folder; holding a checkpoint, the run resumes"),
+    eval_episodes: Optional[int] = typer.Option(None, min=1, help="Episodes for the before/after returns (default: taxi 200, highway 10)"),
+) -> None:
+    """Improve a tree with PPO (tree -> DDT -> PPO -> tree); writes trees, curve and summary.json."""
+    import torch
+
+    from nl2policy.cli import console, domain_or_fail, fail, progress_bar
+    from nl2policy.policy.optimize import optimize_tree
+    from nl2policy.trees import TreeError, load_tree_arg, parse_tree, to_text
+
+    torch.set_num_threads(1)
+    d = domain_or_fail(domain)
+    try:
+        parsed = load_tree_arg(tree, d.vocab)
+    except TreeError as exc:
+        fail(f"bad tree: {exc}")
+    with progress_bar() as bar:
+        task = bar.add_task(f"{domain}: PPO steps", total=steps)
+        try:
+            summary = optimize_tree(domain, parsed, steps, seed, out, eval_episodes=eval_episodes,
+                                    progress=lambda n, total: bar.update(task, completed=n))
+        except ValueError as exc:
+            fail(str(exc))
+    console.print("[bold]before[/]\n" + to_text(parsed, d.vocab))
+    final = json.loads((out / "final_tree.json").read_text())
+    if summary["final_tree_has_raw_tests"]:
+        console.print("[bold]after[/] (has raw threshold tests)\n" + json.dumps(final, indent=2))
+    else:
+        console.print("[bold]after[/]\n" + to_text(parse_tree(final, d.vocab), d.vocab))
+    print(json.dumps(summary))
+
+
+def policy_experiment(
+    domain: str = typer.Option(..., help="taxi or highway"),
+    steps: int = typer.Option(12_000, min=1, help="PPO env steps per run"),
+    candidates: int = typer.Option(15, min=1, help="Most frequent corpus trees to rank"),
+    best: int = typer.Option(5, min=1, help="Best trees (by initial return) to train"),
+    select_episodes: int = typer.Option(100, min=1, help="Episodes per candidate tree when ranking"),
+    tree_seeds: int = typer.Option(2, min=1),
+    baseline_seeds: int = typer.Option(3, min=1),
+    out: Path = typer.Option(Path("results/policy")),
+) -> None:
+    """Table 2: tree-initialized DDT vs random DDT vs MLP (resumable; finished runs are skipped)."""
+    import torch
+
+    from nl2policy.cli import console, domain_or_fail, progress_bar
+    from nl2policy.policy.experiment import plan, run_one, select_trees, summarize
+    from nl2policy.policy.experiment_report import write_figure, write_table
+
+    torch.set_num_threads(1)
+    domain_or_fail(domain)
+    command = (f"nl2policy policy-experiment --domain {domain} --steps {steps} --candidates {candidates} --best {best} "
+               f"--select-episodes {select_episodes} --tree-seeds {tree_seeds} --baseline-seeds {baseline_seeds} --out {out}")
+    root = out / domain
+    selected = select_trees(domain, candidates, best, select_episodes, 0, root)
+    runs = plan(selected, tree_seeds, baseline_seeds)
+    results = []
+    with progress_bar() as bar:
+        overall = bar.add_task(f"{domain}: runs", total=len(runs))
+        for i, (name, method, seed, tree_json) in enumerate(runs):
+            task = bar.add_task(name, total=steps)
+            result = run_one(domain, method, seed, steps, root / "runs" / name, tree_json,
+                             progress=lambda n, total, t=task: bar.update(t, completed=n))
+            if method == "tree_ddt":
+                result["tree_rank"] = int(name.split("_t")[1].split("_")[0])
+            results.append(result)
+            bar.remove_task(task)
+            bar.update(overall, completed=i + 1)
+            # rewrite the table after every run, so a grid cut short still reports what finished
+            settings = {"steps_per_run": steps, "candidates": candidates, "best": best, "select_episodes": select_episodes,
+                        "tree_seeds": list(range(tree_seeds)), "baseline_seeds": list(range(baseline_seeds)),
+                        "finished_runs": f"{len(results)} of {len(runs)}"}
+            md = write_table(domain, summarize(results, domain), results, settings, out, command)
+            write_figure(domain, results, out)
+    console.print(md.read_text())
+
+
+def policy_fidelity(
+    states: int = typer.Option(10_000, min=1, help="Sampled states per distribution"),
+    out: Path = typer.Option(Path("results/policy")),
+    domain: Optional[list[str]] = typer.Option(None, help="Only these domains (repeatable); writes fidelity_<domains>.md"),
+) -> None:
+    """Fresh DDT vs its tree on sampled states, for every distinct corpus tree; round trips."""
+    import torch
+
+    from nl2policy.cli import console, domain_or_fail
+    from nl2policy.domains import DOMAINS
+    from nl2policy.policy.fidelity_report import write_fidelity
+
+    torch.set_num_threads(1)
+    domains = tuple(domain) if domain else DOMAINS
+    for name in domains:
+        domain_or_fail(name)
+    command = f"nl2policy policy-fidelity --states {states} --out {out}" + "".join(f" --domain {d}" for d in domain or [])
+    console.print(write_fidelity(states, out, command, domains).read_text())

@@ -1,0 +1,208 @@
+"""Lexical tree <-> DDT.
+
+Tree -> DDT (exact warm start). Every domain question is one linear test ``w . x > c``
+(``Domain.weights`` / ``Domain.thresholds``), so a question node becomes a DDT node with
+exactly those ``w`` and ``c``; only the sharpness ``gamma`` is a choice. A leaf puts
+``LEAF_MASS`` of its probability on the tree's action and spreads the rest evenly.
+
+How gamma and the leaf mass were chosen (measured agreement for several gammas:
+``results/policy/fidelity.md``, made by ``nl2policy policy-fidelity``):
+* ``LEAF_MASS``, per domain. Highway 0.95; taxi 0.7 since the tuning sweep
+  (``python -m nl2policy.policy.tuning``, results/policy/tuning_taxi.md): at 0.95 the other
+  actions get 1.7 % each, PPO almost never tries them, and in every 12k-step taxi run the
+  discretized tree came back unchanged; at 0.7 (10 % each) PPO finds better leaves. The
+  argmax bound below still holds with a wide margin on taxi (paths are >= 98 % sure).
+  Original reasoning for 0.95: the tree's action must dominate (the fresh DDT should *drive* like
+  the tree: its sampled actions are what PPO's first episodes score), yet leave PPO some
+  entropy to explore with (0.95 over 4-5 actions is ~0.25 nats). With mass m and A actions the
+  tree's action is the mixture's argmax whenever the right leaf's path probability exceeds
+  1 / (1 + m - (1-m)/(A-1)) ~ 0.52, i.e. each of at most 3 nodes on the path is at least
+  0.81 sure: |w.x - c| > 1.45 / gamma.
+* ``GAMMA``: taxi features are exactly 0/1 against thresholds 0.5, so every state is 0.5 from
+  every threshold and gamma = 10 makes each node 99.3 % sure (logit 5). Highway features are
+  continuous in [0, 1]; a state can sit anywhere near a threshold. Measured on 10,000 uniform
+  states, gamma = 100 still missed 0.13 % on the worst corpus tree, gamma = 300 misses at most
+  0.03 % (a node is then 99.3 % sure 0.017 = 1.7 m from its threshold). The price: only states
+  that close to a threshold move a node's test, so on highway PPO mostly refines the leaves.
+
+Optional padding to the full 4-level grid: each leaf above the bottom row becomes a complete
+subtree whose leaves all hold the same action. Its nodes test questions not yet asked on the
+path, so PPO can later split the leaf; with identical leaves below, the padded DDT acts
+exactly like the unpadded one, whatever those nodes answer.
+
+DDT -> tree (discretization): ``ddt_to_tree`` below.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, Optional
+
+import numpy as np
+import torch
+
+from nl2policy.domains import get_domain
+from nl2policy.domains.spec import Domain
+from nl2policy.policy.ddt import DDT, Shape
+from nl2policy.trees import MAX_DEPTH, Leaf, Node, Tree
+
+LEAF_MASS = {"taxi": 0.7, "highway": 0.95}
+GAMMA = {"taxi": 10.0, "highway": 300.0}
+# A learned threshold counts as a domain question when it is this close (in feature units) to
+# the question's threshold. Taxi features are 0/1, so any threshold strictly inside (0, 1) is
+# the same test as the question's 0.5.
+MATCH_TOLERANCE = {"taxi": 0.5, "highway": 0.05}
+RAW_PREFIX = "raw:"
+
+
+def pad_tree(tree: Tree, domain: Domain, depth: int = MAX_DEPTH) -> Tree:
+    """The same policy as a complete tree of `depth` question levels (see module doc)."""
+
+    def grow(node: Tree, level: int, asked: list[str]) -> Tree:
+        if level == depth:
+            return node
+        if isinstance(node, Node):
+            path = asked + [node.question]
+            return Node(node.question, grow(node.yes, level + 1, path), grow(node.no, level + 1, path))
+        question = next((q for q in domain.questions if q not in asked), domain.questions[0])
+        path = asked + [question]
+        return Node(question, grow(node, level + 1, path), grow(node, level + 1, path))
+
+    return grow(tree, 0, [])
+
+
+def _shape_and_tests(tree: Tree) -> tuple[Shape, list[str], list[str]]:
+    """Pre-order numbering: the shape, each node's question, each leaf's action."""
+    yes_child: list = []
+    no_child: list = []
+    questions: list[str] = []
+    actions: list[str] = []
+
+    def visit(node: Tree) -> tuple[str, int]:
+        if isinstance(node, Leaf):
+            actions.append(node.action)
+            return ("leaf", len(actions) - 1)
+        index = len(questions)
+        questions.append(node.question)
+        yes_child.append(None)
+        no_child.append(None)
+        yes_child[index] = visit(node.yes)
+        no_child[index] = visit(node.no)
+        return ("node", index)
+
+    visit(tree)
+    return Shape(tuple(yes_child), tuple(no_child), len(actions)), questions, actions
+
+
+def tree_to_ddt(domain_name: str, tree: Tree, pad: bool = False, gamma: Optional[float] = None,
+                leaf_mass: Optional[float] = None) -> DDT:
+    """A DDT that acts like `tree` (exact weights and comparators from the domain spec)."""
+    domain = get_domain(domain_name)
+    leaf_mass = LEAF_MASS[domain_name] if leaf_mass is None else leaf_mass
+    if pad:
+        tree = pad_tree(tree, domain)
+    shape, questions, actions = _shape_and_tests(tree)
+    n_actions = len(domain.actions)
+    ddt = DDT(shape, len(domain.features), n_actions, GAMMA[domain_name] if gamma is None else gamma)
+    rows = [domain.questions.index(q) for q in questions]
+    other = math.log((1.0 - leaf_mass) / (n_actions - 1))
+    logits = torch.full((shape.leaves, n_actions), other)
+    for leaf, action in enumerate(actions):
+        logits[leaf, domain.action_index(action)] = math.log(leaf_mass)
+    with torch.no_grad():
+        ddt.weights.copy_(torch.as_tensor(domain.weights[rows], dtype=torch.float32).reshape(shape.nodes, -1))
+        ddt.comparators.copy_(torch.as_tensor(domain.thresholds[rows], dtype=torch.float32))
+        ddt.leaf_logits.copy_(logits)
+    return ddt
+
+
+def _single_feature_questions(domain: Domain) -> list[tuple[str, int, float, float]]:
+    """(question, feature, sign, threshold-in-feature-units) for single-feature questions."""
+    out = []
+    for q, w, c in zip(domain.questions, domain.weights, domain.thresholds):
+        nonzero = np.flatnonzero(w)
+        if len(nonzero) == 1:
+            f = int(nonzero[0])
+            out.append((q, f, float(np.sign(w[f])), float(c / w[f])))
+    return out
+
+
+def ddt_to_tree(domain_name: str, ddt: DDT, tolerance: Optional[float] = None) -> Tree:
+    """A readable tree from a DDT: each node keeps its dominant feature and threshold, named
+    as the nearest domain question with that feature and direction (branches swapped for a
+    negated question) or kept as a raw test ``raw:<feature><op><threshold>``; each leaf keeps
+    its most likely action. Pruned: nodes whose threshold lies outside the [0, 1] feature box
+    (they always answer the same), questions already answered higher on the path, and nodes
+    whose two branches came out identical."""
+    domain = get_domain(domain_name)
+    tol = MATCH_TOLERANCE[domain_name] if tolerance is None else tolerance
+    candidates = _single_feature_questions(domain)
+    w = ddt.weights.detach().cpu().numpy().astype(np.float64)
+    c = ddt.comparators.detach().cpu().numpy().astype(np.float64)
+    leaf_actions = ddt.leaf_logits.detach().cpu().numpy().argmax(axis=1)
+
+    def build(child: tuple[str, int], answered: dict[str, bool]) -> Tree:
+        kind, i = child
+        if kind == "leaf":
+            return Leaf(domain.actions[int(leaf_actions[i])])
+        yes_branch, no_branch = ddt.shape.yes_child[i], ddt.shape.no_child[i]
+        f = int(np.argmax(np.abs(w[i])))
+        weight = w[i, f]
+        if abs(weight) < 1e-8:  # no test left: the node always answers by the sign of -c
+            return build(yes_branch if -c[i] > 0 else no_branch, answered)
+        threshold = c[i] / weight
+        greater = weight > 0  # yes iff x_f > threshold (else x_f < threshold)
+        if threshold >= 1.0 or threshold <= 0.0:  # constant on the feature box [0, 1]
+            always_yes = (threshold < 0.0) if greater else (threshold > 1.0)
+            return build(yes_branch if always_yes else no_branch, answered)
+        best = min((cand for cand in candidates if cand[1] == f), key=lambda cand: abs(cand[3] - threshold), default=None)
+        if best is None or abs(best[3] - threshold) > tol:
+            name = f"{RAW_PREFIX}{domain.features[f]}{'>' if greater else '<'}{threshold:.4f}"
+            return _join(name, build(yes_branch, answered), build(no_branch, answered))
+        question, _, sign, _ = best
+        swapped = (sign > 0) != greater
+        if swapped:
+            yes_branch, no_branch = no_branch, yes_branch
+        if question in answered:
+            return build(yes_branch if answered[question] else no_branch, answered)
+        return _join(question, build(yes_branch, {**answered, question: True}),
+                     build(no_branch, {**answered, question: False}))
+
+    if ddt.shape.nodes == 0:
+        return build(("leaf", 0), {})
+    return build(("node", 0), {})
+
+
+def _join(question: str, yes: Tree, no: Tree) -> Tree:
+    return yes if yes == no else Node(question, yes, no)
+
+
+def _raw_answer(question: str, domain: Domain, x: np.ndarray) -> bool:
+    body = question[len(RAW_PREFIX):]
+    op = ">" if ">" in body else "<"
+    feature, value = body.split(op)
+    xf = float(x[domain.features.index(feature)])
+    return xf > float(value) if op == ">" else xf < float(value)
+
+
+def tree_act_fn(domain_name: str, tree: Tree) -> Callable[[np.ndarray], int]:
+    """Act with a discretized tree, raw threshold tests included."""
+    domain = get_domain(domain_name)
+
+    def act(x: np.ndarray) -> int:
+        answers = domain.answers(x)
+        node = tree
+        while isinstance(node, Node):
+            if node.question.startswith(RAW_PREFIX):
+                node = node.yes if _raw_answer(node.question, domain, x) else node.no
+            else:
+                node = node.yes if answers[node.question] else node.no
+        return domain.action_index(node.action)
+
+    return act
+
+
+def has_raw_tests(tree: Tree) -> bool:
+    from nl2policy.trees.tree import iter_nodes
+
+    return any(n.question.startswith(RAW_PREFIX) for n in iter_nodes(tree))

@@ -1,0 +1,73 @@
+"""Does the fresh DDT act like its tree? Agreement of the DDT's most likely action with the
+tree's action on sampled states, for every distinct corpus tree, plus the discretization
+round trip (fresh DDT -> tree gives back the same tree).
+
+States come from two distributions, because they fail differently: the env's own states
+(rolled with random actions: what the policy meets) and uniform states (taxi: every feature
+vector the world can produce, equally often; highway: uniform in the [0, 1]^6 feature box,
+which puts far more mass near thresholds than real traffic does).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from nl2policy.domains import get_domain, make_env
+from nl2policy.policy.convert import tree_to_ddt, ddt_to_tree
+from nl2policy.trees import Leaf, Tree
+
+
+def env_states(domain: str, n: int, seed: int = 0) -> np.ndarray:
+    """`n` observations met by rolling the env with uniformly random actions."""
+    env = make_env(domain)
+    rng = np.random.default_rng(seed)
+    obs, _ = env.reset(seed=seed)
+    states, episode = [obs], 0
+    while len(states) < n:
+        obs, _, terminated, truncated, _ = env.step(int(rng.integers(env.action_space.n)))
+        if terminated or truncated:
+            episode += 1
+            obs, _ = env.reset(seed=seed + episode)
+        states.append(obs)
+    return np.asarray(states, dtype=np.float32)
+
+
+def uniform_states(domain: str, n: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    if domain == "taxi":  # one-hot place, three free bits
+        place = np.eye(3)[rng.integers(3, size=n)]
+        return np.hstack([place, rng.integers(2, size=(n, 3))]).astype(np.float32)
+    return rng.uniform(0.0, 1.0, size=(n, len(get_domain(domain).features))).astype(np.float32)
+
+
+def tree_actions_batch(domain: str, tree: Tree, states: np.ndarray) -> np.ndarray:
+    """The tree's action index for every state, by boolean masks down the tree (vectorized
+    ``Domain.tree_action``)."""
+    d = get_domain(domain)
+    answers = d.answer_matrix(states)
+    actions = np.full(len(states), -1)
+
+    def route(node: Tree, mask: np.ndarray) -> None:
+        if isinstance(node, Leaf):
+            actions[mask] = d.action_index(node.action)
+            return
+        yes = answers[:, d.questions.index(node.question)]
+        route(node.yes, mask & yes)
+        route(node.no, mask & ~yes)
+
+    route(tree, np.ones(len(states), dtype=bool))
+    return actions
+
+
+def agreement(domain: str, tree: Tree, states: np.ndarray, pad: bool = False, gamma: float | None = None) -> float:
+    """Fraction of `states` on which the fresh DDT's argmax action is the tree's action."""
+    d = get_domain(domain)
+    tree_actions = tree_actions_batch(domain, tree, states)
+    ddt = tree_to_ddt(domain, tree, pad=pad, gamma=gamma)
+    ddt_actions = ddt.greedy(torch.as_tensor(states)).numpy()
+    return float(np.mean(ddt_actions == tree_actions))
+
+
+def round_trips(domain: str, tree: Tree, pad: bool = False) -> bool:
+    return ddt_to_tree(domain, tree_to_ddt(domain, tree, pad=pad)) == tree

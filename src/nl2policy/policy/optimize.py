@@ -1,0 +1,191 @@
+"""Optimize a lexical tree with PPO: tree -> DDT -> PPO -> discretized tree, checkpointed.
+
+The training loop is in plain view in ``train_checkpointed``: learn one chunk of steps, save
+the SB3 model, the step count and the episode curve so far, repeat. A killed run started
+again with the same ``out`` folder loads the checkpoint and continues from the saved step.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from pathlib import Path
+from typing import Callable, Optional
+
+import numpy as np
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback
+
+from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn
+from nl2policy.policy.rollout import evaluate, tree_policy
+from nl2policy.policy.sb3_policy import PPO_SETTINGS, TreePPO, actor_ddt, make_ppo, make_vec_env, soft_act_fn
+from nl2policy.trees import Tree, tree_to_json
+
+WINDOW = {"taxi": 100, "highway": 20}  # episodes in the rolling mean of training reward
+EVAL_EPISODES = {"taxi": 200, "highway": 10}
+EVAL_SEED = 50_000  # evaluation episodes use seeds far from the training env's
+CHECKPOINT = "checkpoint.zip"
+STATE = "state.json"
+
+Progress = Optional[Callable[[int, int], None]]
+
+
+class EpisodeLog(BaseCallback):
+    """Records (step, return) of every finished episode (from SB3's Monitor) and reports progress."""
+
+    def __init__(self, episodes: list, total: int, progress: Progress) -> None:
+        super().__init__()
+        self.episodes, self.total, self.progress = episodes, total, progress
+
+    def _on_step(self) -> bool:
+        for info in self.locals["infos"]:
+            if "episode" in info:
+                self.episodes.append((int(self.num_timesteps), float(info["episode"]["r"])))
+        if self.progress:
+            self.progress(min(int(self.num_timesteps), self.total), self.total)
+        return True
+
+
+def checkpoint_tree_score(domain: str) -> Optional[Callable[[PPO], tuple[dict, float]]]:
+    """How to score the discretized tree at each checkpoint, or None where that is too dear.
+
+    Taxi: the exact expected return of the discretized tree (``domains.taxi.expected_return``,
+    ~0.1 s, no sampling noise). PPO's discretized tree wanders between checkpoints (measured:
+    results/policy/tuning_taxi.md), so the run also keeps the best tree it passed through,
+    the way one keeps the best checkpoint on a validation score. Highway has no exact model
+    and sampled episodes cost seconds each, so nothing is tracked there."""
+    if domain != "taxi":
+        return None
+    from nl2policy.domains.taxi import TaxiModel, expected_return
+
+    def score(model: PPO) -> tuple[dict, float]:
+        tree = ddt_to_tree(domain, actor_ddt(model))
+        return tree_to_json(tree), expected_return(TaxiModel(), tree_act_fn(domain, tree))
+
+    return score
+
+
+def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int, steps: int, run_dir: Path,
+                       progress: Progress = None,
+                       score_tree: Optional[Callable[[PPO], tuple[dict, float]]] = None) -> tuple[PPO, list, float, Optional[dict]]:
+    """Train to `steps` env steps, checkpointing into `run_dir`; resumes a saved run.
+
+    With `score_tree`, the discretized tree is scored after every chunk and the best one kept
+    (``{"step", "tree", "score"}``; the initial actor's tree counts as step 0).
+    Returns the model, the episode log [(step, return)], the training seconds (all sessions)
+    and the best tree record (None without `score_tree`)."""
+    # PPO here runs batch-of-one forward passes through tiny nets: extra intra-op threads only
+    # contend (measured 25x slower with 2 threads on a busy 2-core machine), so use one.
+    torch.set_num_threads(1)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    state_path, ckpt_path = run_dir / STATE, run_dir / CHECKPOINT
+    if state_path.is_file() and ckpt_path.is_file():
+        state = json.loads(state_path.read_text())
+        model = TreePPO.load(ckpt_path, env=make_vec_env(domain, seed + 1000 * (state["chunks"] + 1)), device="cpu")
+        episodes, seconds, chunks = [tuple(e) for e in state["episodes"]], state["seconds"], state["chunks"]
+        best = state.get("best_tree")
+    else:
+        model, episodes, seconds, chunks = model_factory(), [], 0.0, 0
+        best = None
+        if score_tree is not None:
+            tree_json, score = score_tree(model)
+            best = {"step": 0, "tree": tree_json, "score": score}
+    rollout = PPO_SETTINGS[domain]["n_steps"]
+    chunk = rollout * max(1, steps // (10 * rollout))  # about ten checkpoints per run
+    log = EpisodeLog(episodes, steps, progress)
+    while model.num_timesteps < steps:
+        start = time.perf_counter()
+        model.learn(min(chunk, steps - model.num_timesteps), callback=log, reset_num_timesteps=False)
+        seconds += time.perf_counter() - start
+        chunks += 1
+        if score_tree is not None:
+            tree_json, score = score_tree(model)
+            if score > best["score"]:
+                best = {"step": int(model.num_timesteps), "tree": tree_json, "score": score}
+        model.save(ckpt_path)
+        state_path.write_text(json.dumps({"steps": int(model.num_timesteps), "seconds": seconds,
+                                          "chunks": chunks, "episodes": episodes, "best_tree": best}))
+    if progress:
+        progress(steps, steps)
+    return model, episodes, seconds, best
+
+
+def rolling_mean(returns: list[float], window: int) -> np.ndarray:
+    """Mean of the last `window` episodes after each episode (fewer at the start)."""
+    r = np.asarray(returns, dtype=float)
+    if len(r) == 0:
+        return r
+    cumulative = np.concatenate([[0.0], np.cumsum(r)])
+    idx = np.arange(1, len(r) + 1)
+    lo = np.maximum(0, idx - window)
+    return (cumulative[idx] - cumulative[lo]) / (idx - lo)
+
+
+def write_curve(episodes: list, window: int, out: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = [s for s, _ in episodes]
+    returns = [r for _, r in episodes]
+    rolling = rolling_mean(returns, window)
+    with open(out / "curve.csv", "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["episode", "step", "return", f"rolling_mean_{window}"])
+        for i, (s, r, m) in enumerate(zip(steps, returns, rolling)):
+            writer.writerow([i + 1, s, r, f"{m:.4f}"])
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    ax.plot(steps, returns, ".", ms=2, alpha=0.3, label="episode return")
+    ax.plot(steps, rolling, label=f"rolling mean ({window} episodes)")
+    ax.set_xlabel("env steps")
+    ax.set_ylabel("episode return")
+    ax.set_title(title)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(out / "curve.png", dpi=120)
+    plt.close(fig)
+
+
+def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, progress: Progress = None,
+                  eval_episodes: Optional[int] = None) -> dict:
+    """PPO from the tree-initialized DDT; writes initial_tree.json, final_tree.json, curve.csv,
+    curve.png and summary.json into `out` and returns the summary (see module doc)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    tree_path = out / "initial_tree.json"
+    if (out / STATE).is_file() and tree_path.is_file() and json.loads(tree_path.read_text()) != tree_to_json(tree):
+        raise ValueError(f"{out} holds a checkpoint of a run from a different tree; choose another --out")
+    tree_path.write_text(json.dumps(tree_to_json(tree), indent=2))
+    model, episodes, seconds, best = train_checkpointed(lambda: make_ppo(domain, "tree_ddt", seed, tree), domain,
+                                                        seed, steps, out, progress, checkpoint_tree_score(domain))
+    final_tree = ddt_to_tree(domain, actor_ddt(model))
+    (out / "final_tree.json").write_text(json.dumps(tree_to_json(final_tree), indent=2))
+    if best is not None:
+        (out / "best_tree.json").write_text(json.dumps(best["tree"], indent=2))
+    window = WINDOW[domain]
+    write_curve(episodes, window, out, f"{domain}: PPO from the tree-initialized DDT (seed {seed})")
+    n = eval_episodes or EVAL_EPISODES[domain]
+    rolling = rolling_mean([r for _, r in episodes], window)
+    summary = {
+        "domain": domain, "seed": seed, "steps": int(model.num_timesteps), "seconds": round(seconds, 2),
+        "eval_episodes": n, "eval_seed": EVAL_SEED,
+        "initial_mean_return": evaluate(domain, tree_policy(domain, tree), n, EVAL_SEED).mean_return,
+        "final_mean_return": evaluate(domain, tree_act_fn(domain, final_tree), n, EVAL_SEED).mean_return,
+        "final_soft_ddt_return": evaluate(domain, soft_act_fn(model, deterministic=False), n, EVAL_SEED).mean_return,
+        "final_tree_has_raw_tests": has_raw_tests(final_tree),
+        "training_episodes": len(episodes), "rolling_window": window,
+        "first_rolling_return": float(rolling[min(window, len(rolling)) - 1]) if len(rolling) else None,
+        "last_rolling_return": float(rolling[-1]) if len(rolling) else None,
+    }
+    summary["discretization_gap"] = summary["final_mean_return"] - summary["final_soft_ddt_return"]
+    if best is not None:  # taxi: exact expected returns of the initial, final and best-checkpoint trees
+        from nl2policy.domains.taxi import TaxiModel, expected_return
+
+        summary["exact_initial_tree"] = expected_return(TaxiModel(), tree_act_fn(domain, tree))
+        summary["exact_final_tree"] = expected_return(TaxiModel(), tree_act_fn(domain, final_tree))
+        summary["exact_best_tree"], summary["best_tree_step"] = best["score"], best["step"]
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    return summary

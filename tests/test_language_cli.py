@@ -1,0 +1,106 @@
+"""The translate/train-translator contract, and the confidence of bad input.
+
+Uses the tiny "smoke" model (one epoch) in a temporary NL2POLICY_HOME: these tests check the
+plumbing and the topic detector, not translation quality (that is the experiment's job).
+"""
+
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from nl2policy.cli import app
+from nl2policy.domains import get_domain
+from nl2policy.language import translate as tr
+from nl2policy.language.corpus import load_corpus
+from nl2policy.trees import parse_tree, to_grid
+
+runner = CliRunner()
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    """One torch thread: the CI box has 2 cores, and oversubscribed threads crawl."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+
+@pytest.fixture(scope="module")
+def home(tmp_path_factory):
+    mp = pytest.MonkeyPatch()
+    path = tmp_path_factory.mktemp("nl2policy_home")
+    mp.setenv("NL2POLICY_HOME", str(path))
+    tr._LOADED.clear()
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    out = runner.invoke(app, ["train-translator", "--domain", "taxi", "--model", "smoke"])
+    torch.set_num_threads(threads)
+    assert out.exit_code == 0, out.output
+    yield path
+    tr._LOADED.clear()
+    mp.undo()
+
+
+def test_training_saves_the_model_and_no_checkpoint(home):
+    assert (home / "models" / "taxi-smoke.pt").is_file()
+    assert not (home / "models" / "taxi-smoke.ckpt").exists()
+
+
+def test_translate_text_and_json(home):
+    text = load_corpus("taxi")[0].description
+    out = runner.invoke(app, ["translate", "--domain", "taxi", "--model", "smoke", text])
+    assert out.exit_code == 0, out.output
+    assert "confidence:" in out.stdout and "->" in out.stdout
+    out = runner.invoke(app, ["translate", "--domain", "taxi", "--model", "smoke", "--json", text])
+    data = json.loads(out.stdout)
+    assert {"tree", "confidence", "warnings"} <= set(data)
+    parse_tree(data["tree"], get_domain("taxi").vocab)
+    assert 0.0 <= data["confidence"] <= 1.0
+
+
+def test_jsonl_gives_one_object_per_line_in_order_with_errors(home, tmp_path):
+    specs = load_corpus("taxi")
+    lines = [json.dumps({"description": specs[0].description}), "{not json", json.dumps({"text": "no field"}),
+             json.dumps({"description": "   "}), json.dumps({"description": specs[1].description, "id": 7})]
+    path = tmp_path / "in.jsonl"
+    path.write_text("\n".join(lines) + "\n")
+    out = runner.invoke(app, ["translate", "--domain", "taxi", "--model", "smoke", "--jsonl", str(path)])
+    assert out.exit_code == 0, out.output
+    rows = [json.loads(l) for l in out.stdout.strip().splitlines()]
+    assert len(rows) == 5
+    assert "tree" in rows[0] and "confidence" in rows[0] and "tree" in rows[4]
+    assert "not valid JSON" in rows[1]["error"]
+    assert "description" in rows[2]["error"]
+    assert "empty" in rows[3]["error"]
+
+
+def test_bad_input_exits_non_zero(home):
+    assert runner.invoke(app, ["translate", "--domain", "taxi", "--model", "smoke", "  "]).exit_code != 0
+    assert runner.invoke(app, ["translate", "--domain", "boat", "--model", "smoke", "hi"]).exit_code != 0
+    assert runner.invoke(app, ["translate", "--domain", "taxi", "--model", "nope", "hi"]).exit_code != 0
+    assert runner.invoke(app, ["translate", "--domain", "taxi", "--model", "smoke", "--jsonl", "/no/such"]).exit_code != 0
+
+
+def test_empty_description_is_an_error(home):
+    with pytest.raises(tr.EmptyDescription, match="empty"):
+        tr.translate("taxi", " \n ", "smoke")
+
+
+def test_off_topic_and_other_domain_get_low_confidence_and_a_warning(home):
+    off = tr.translate("taxi", "I really like pizza and my cat sleeps all afternoon.", "smoke")
+    assert off.confidence <= 0.05 and any("off-topic" in w for w in off.warnings)
+    highway_text = load_corpus("highway")[3].description
+    other = tr.translate("taxi", highway_text, "smoke")
+    assert other.confidence <= 0.1 and any("highway" in w for w in other.warnings)
+    for spec in load_corpus("taxi")[:40]:
+        own = tr.translate("taxi", spec.description, "smoke")
+        assert not any("off-topic" in w or "reads like" in w for w in own.warnings), spec.id
+        grid = to_grid(own.tree)
+        assert set(own.node_confidence) == {i for i, x in enumerate(grid) if x is not None}
+        assert all(0.0 <= p <= 1.0 for p in own.node_confidence.values())

@@ -1,0 +1,57 @@
+"""The shipped default translators: a fresh install translates without training first."""
+
+import time
+
+import pytest
+
+from nl2policy.domains import DOMAINS, get_domain
+from nl2policy.language import translate as tr
+from nl2policy.language.corpus import load_corpus
+from nl2policy.language.models.config import DEFAULT_MODEL
+from nl2policy.trees.parse import validate
+
+
+@pytest.fixture
+def empty_home(tmp_path, monkeypatch):
+    import torch
+
+    monkeypatch.setenv("NL2POLICY_HOME", str(tmp_path))
+    tr._LOADED.clear()
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield tmp_path
+    torch.set_num_threads(threads)
+    tr._LOADED.clear()
+
+
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_default_model_is_shipped(domain):
+    path = tr.SHIPPED_DIR / f"{domain}-{DEFAULT_MODEL}.pt"
+    assert path.is_file(), f"run the command in {tr.SHIPPED_DIR / 'README.md'}"
+    assert path.stat().st_size < 6_000_000
+
+
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_translate_uses_the_shipped_model_without_training(domain, empty_home, monkeypatch):
+    def no_training(*args, **kwargs):
+        raise AssertionError("translate() trained a model although one is shipped")
+
+    monkeypatch.setattr(tr, "train_default", no_training)
+    assert tr.find_model(domain) == tr.SHIPPED_DIR / f"{domain}-{DEFAULT_MODEL}.pt"
+    specs = load_corpus(domain)
+    start = time.perf_counter()
+    result = tr.translate(domain, specs[0].description)
+    assert time.perf_counter() - start < 30  # loading + one translation; no training
+    validate(result.tree, get_domain(domain).vocab)
+    assert 0.0 <= result.confidence <= 1.0
+    # the shipped model was trained on the corpus: it must reproduce most of a few training trees
+    right = sum(tr.translate(domain, s.description).tree == s.tree for s in specs[:20])
+    assert right >= 14
+    assert not list(empty_home.glob("models/*.pt"))
+
+
+def test_user_model_takes_precedence_over_the_shipped_one(empty_home):
+    user = empty_home / "models" / f"taxi-{DEFAULT_MODEL}.pt"
+    user.parent.mkdir(parents=True)
+    user.write_bytes(b"")
+    assert tr.find_model("taxi") == user

@@ -1,0 +1,110 @@
+"""PPO with the DDT actor, end to end: files written, resume after a kill, CLI errors."""
+
+import json
+
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from nl2policy.cli import app
+from nl2policy.policy.optimize import optimize_tree
+from nl2policy.policy.sb3_policy import actor_ddt, make_ppo
+from nl2policy.trees import Leaf, Node, tree_to_json
+
+TREE = Node("has_passenger", Leaf("go_airport"), Node("heavy_traffic", Leaf("go_village"), Leaf("go_city")))
+FILES = ("initial_tree.json", "final_tree.json", "curve.csv", "curve.png", "summary.json")
+runner = CliRunner()
+
+
+def test_ppo_policy_starts_from_the_tree_ddt_and_acts_like_the_tree():
+    model = make_ppo("taxi", "tree_ddt", seed=0, tree=TREE)
+    x = torch.tensor([[0, 0, 1, 0, 1, 0], [0, 1, 0, 1, 0, 0]], dtype=torch.float32)  # city/jam/empty; village/passenger
+    dist = model.policy.get_distribution(x)
+    assert dist.distribution.probs.argmax(-1).tolist() == [1, 0]  # go_village, go_airport
+    assert len(actor_ddt(model).weights) == 7  # padded to the 15-slot grid
+
+
+def test_tiny_optimize_run_writes_every_file(tmp_path):
+    calls = []
+    summary = optimize_tree("taxi", TREE, steps=512, seed=0, out=tmp_path, progress=lambda n, t: calls.append((n, t)),
+                            eval_episodes=5)
+    for name in FILES:
+        assert (tmp_path / name).is_file() and (tmp_path / name).stat().st_size > 0
+    assert summary["steps"] == 512 and calls[-1] == (512, 512)
+    assert json.loads((tmp_path / "initial_tree.json").read_text()) == tree_to_json(TREE)
+    assert set(summary) >= {"initial_mean_return", "final_mean_return", "steps", "seconds"}
+    assert json.loads((tmp_path / "summary.json").read_text()) == summary
+    assert len((tmp_path / "curve.csv").read_text().splitlines()) == summary["training_episodes"] + 1
+
+
+class Killed(Exception):
+    pass
+
+
+def test_killed_run_resumes_from_its_checkpoint(tmp_path):
+    def die_after_first_chunk(n, total):
+        if n > 512:
+            raise Killed
+
+    with pytest.raises(Killed):  # chunk = 512 steps: one checkpoint is written, then the "kill"
+        optimize_tree("taxi", TREE, steps=1024, seed=0, out=tmp_path, progress=die_after_first_chunk, eval_episodes=2)
+    state = json.loads((tmp_path / "state.json").read_text())
+    assert state["steps"] == 512 and state["episodes"]
+    seen = []
+    summary = optimize_tree("taxi", TREE, steps=1024, seed=0, out=tmp_path, progress=lambda n, t: seen.append(n),
+                            eval_episodes=2)
+    assert summary["steps"] == 1024
+    assert min(seen) > 512  # continued from the checkpoint, not from zero
+    curve_steps = [int(line.split(",")[1]) for line in (tmp_path / "curve.csv").read_text().splitlines()[1:]]
+    assert curve_steps[: len(state["episodes"])] == [s for s, _ in state["episodes"]]  # curve so far kept
+    assert curve_steps == sorted(curve_steps) and curve_steps[-1] <= 1024
+
+
+@pytest.mark.parametrize("tree, message", [
+    ('{"if": "is_raining", "yes": {"do": "go_city"}, "no": {"do": "wait"}}', "is_raining"),
+    ("not json at all {", "bad tree"),
+    ("/no/such/file.json", "bad tree"),
+])
+def test_optimize_rejects_bad_trees(tree, message, tmp_path):
+    result = runner.invoke(app, ["optimize", "--domain", "taxi", "--tree", tree, "--steps", "64", "--out", str(tmp_path)])
+    assert result.exit_code != 0
+    assert message in result.output
+    assert not (tmp_path / "summary.json").exists()
+
+
+def test_optimize_cli_runs(tmp_path):
+    tree = json.dumps(tree_to_json(TREE))
+    result = runner.invoke(app, ["optimize", "--domain", "taxi", "--tree", tree, "--steps", "512", "--out", str(tmp_path),
+                                 "--eval-episodes", "5"])
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.output.strip().splitlines()[-1])["steps"] == 512
+
+
+def test_optimize_refuses_to_resume_a_different_trees_run(tmp_path):
+    optimize_tree("taxi", TREE, steps=512, seed=0, out=tmp_path, eval_episodes=2)
+    other = json.dumps(tree_to_json(Leaf("wait")))
+    result = runner.invoke(app, ["optimize", "--domain", "taxi", "--tree", other, "--steps", "512", "--out", str(tmp_path)])
+    assert result.exit_code != 0 and "different tree" in result.output
+    assert json.loads((tmp_path / "initial_tree.json").read_text()) == tree_to_json(TREE)  # nothing lost
+
+
+def test_ppo_improves_a_deliberately_bad_taxi_tree_judged_exactly(tmp_path):
+    """The improvement mechanism: 'wait when empty' earns nothing (exact return 0); PPO from its
+    DDT, with taxi's settings (actor lr x33, leaf mass 0.7, entropy 0.01), finds a better
+    leaf within a few thousand steps. Measured on seeds 0-5: improved by 8192 steps on all six
+    (seed 2 by 3072); deterministic for a fixed seed on one thread."""
+    bad = Node("has_passenger", Leaf("go_airport"), Leaf("wait"))
+    summary = optimize_tree("taxi", bad, steps=6144, seed=2, out=tmp_path, eval_episodes=2)
+    assert summary["exact_initial_tree"] == 0.0
+    assert summary["exact_best_tree"] > 5.0 and summary["best_tree_step"] > 0
+    assert json.loads((tmp_path / "best_tree.json").read_text()) != tree_to_json(bad)
+
+
+def test_actor_learning_rate_scale_survives_sb3s_schedule():
+    from nl2policy.policy.sb3_policy import ACTOR_LR_SCALE, PPO_SETTINGS
+
+    model = make_ppo("taxi", "tree_ddt", seed=0, tree=TREE)
+    model.learn(512)  # SB3 resets every group's lr before each update; TreePPO rescales the actor's
+    lrs = {group["lr_scale"]: group["lr"] for group in model.policy.optimizer.param_groups}
+    base = PPO_SETTINGS["taxi"]["learning_rate"]
+    assert lrs == pytest.approx({1.0: base, ACTOR_LR_SCALE["taxi"]: base * ACTOR_LR_SCALE["taxi"]})
