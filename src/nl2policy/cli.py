@@ -37,6 +37,15 @@ def domain_or_fail(name: str):
         fail(str(exc.args[0]))
 
 
+def tree_or_fail(domain: str, arg: str):
+    """A tree from a CLI argument (inline JSON or a file), or exit 2 naming the problem."""
+    d = domain_or_fail(domain)
+    try:
+        return load_tree_arg(arg, d.vocab)
+    except TreeError as exc:
+        fail(f"bad tree: {exc}")
+
+
 @app.command()
 def evaluate(
     domain: str = typer.Option(..., help=f"One of: {', '.join(DOMAINS)}"),
@@ -47,11 +56,7 @@ def evaluate(
     """Run a tree as a policy; print {"mean_return", "stderr", "episodes"} as JSON."""
     from nl2policy.policy.rollout import evaluate as run_eval, tree_policy
 
-    d = domain_or_fail(domain)
-    try:
-        parsed = load_tree_arg(tree, d.vocab)
-    except TreeError as exc:
-        fail(f"bad tree: {exc}")
+    parsed = tree_or_fail(domain, tree)
     with progress_bar() as bar:
         task = bar.add_task(f"{domain} episodes", total=episodes)
         result = run_eval(domain, tree_policy(domain, parsed), episodes, seed,

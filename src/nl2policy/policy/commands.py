@@ -26,16 +26,13 @@ def optimize(
     """Improve a tree with PPO (tree -> DDT -> PPO -> tree); writes trees, curve and summary.json."""
     import torch
 
-    from nl2policy.cli import console, domain_or_fail, fail, progress_bar
+    from nl2policy.cli import console, domain_or_fail, fail, progress_bar, tree_or_fail
     from nl2policy.policy.optimize import optimize_tree
-    from nl2policy.trees import TreeError, load_tree_arg, parse_tree, to_text
+    from nl2policy.trees import parse_tree, to_text
 
     torch.set_num_threads(1)
     d = domain_or_fail(domain)
-    try:
-        parsed = load_tree_arg(tree, d.vocab)
-    except TreeError as exc:
-        fail(f"bad tree: {exc}")
+    parsed = tree_or_fail(domain, tree)
     with progress_bar() as bar:
         task = bar.add_task(f"{domain}: PPO steps", total=steps)
         try:
