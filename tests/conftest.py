@@ -20,3 +20,14 @@ def highway():
     from nl2policy.domains import get_domain
 
     return get_domain("highway")
+
+
+@pytest.fixture
+def one_torch_thread():
+    """One torch thread: the CI box has 2 cores, and oversubscribed threads crawl."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)

@@ -15,15 +15,7 @@ from nl2policy.language.train import TrainedTranslator
 from nl2policy.trees import from_tokens, to_tokens
 from nl2policy.trees.parse import validate
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """One torch thread: the CI box has 2 cores, and oversubscribed threads crawl."""
-    import torch
-
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 

@@ -65,7 +65,7 @@ def _parse(domain: str, tree: Any = None, grid: Optional[list] = None):
             return from_grid(grid, d.vocab)
         if tree is None:
             raise TreeError("give a tree or a grid", "request")
-        return parse_tree(tree if not isinstance(tree, str) else tree, d.vocab)
+        return parse_tree(tree, d.vocab)
     except TreeError as exc:
         raise HTTPException(422, {"message": exc.message, "where": exc.where, "error": str(exc)}) from exc
 

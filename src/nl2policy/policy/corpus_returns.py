@@ -16,7 +16,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from nl2policy.language.corpus import load_corpus
-from nl2policy.policy.rollout import evaluate, random_policy, tree_policy
+from nl2policy.policy.rollout import Evaluation, evaluate, random_policy, tree_policy
 from nl2policy.trees import Tree, tree_to_json
 
 FRESH_SEED_OFFSET = 100_000  # final measurements use seeds disjoint from screening seeds
@@ -38,9 +38,10 @@ def distinct_trees(domain: str) -> list[Tree]:
     return list(seen.values())
 
 
-def _screen(args: tuple[str, Tree, int, int]) -> float:
+def _evaluate_tree(args: tuple[str, Tree, int, int]) -> Evaluation:
+    """One tree's evaluation; a top-level function so a process pool can run it."""
     domain, tree, episodes, seed = args
-    return evaluate(domain, tree_policy(domain, tree), episodes, seed).mean_return
+    return evaluate(domain, tree_policy(domain, tree), episodes, seed)
 
 
 def corpus_returns(domain: str, screen_episodes: int, episodes: int, seed: int, workers: int = 2,
@@ -49,8 +50,8 @@ def corpus_returns(domain: str, screen_episodes: int, episodes: int, seed: int, 
     jobs = [(domain, t, screen_episodes, seed) for t in trees]
     screened: list[float] = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        for i, value in enumerate(pool.map(_screen, jobs, chunksize=4)):
-            screened.append(value)
+        for i, ev in enumerate(pool.map(_evaluate_tree, jobs, chunksize=4)):
+            screened.append(ev.mean_return)
             if progress:
                 progress(i + 1, len(trees))
     order = np.argsort(screened)
@@ -58,7 +59,7 @@ def corpus_returns(domain: str, screen_episodes: int, episodes: int, seed: int, 
     fresh = seed + FRESH_SEED_OFFSET
     rows = [_row("random", evaluate(domain, random_policy(domain, fresh), episodes, fresh))]
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        evals = list(pool.map(_final, [(domain, t, episodes, fresh) for t in picks.values()]))
+        evals = list(pool.map(_evaluate_tree, [(domain, t, episodes, fresh) for t in picks.values()]))
     for (name, tree), ev in zip(picks.items(), evals):
         rows.append(_row(name, ev, tree_to_json(tree)))
     if domain == "taxi":
@@ -68,11 +69,6 @@ def corpus_returns(domain: str, screen_episodes: int, episodes: int, seed: int, 
         best = picks["best corpus tree"]
         rows.append(Row("best corpus tree (exact)", expected_return(TaxiModel(), tree_policy("taxi", best)), 0.0, 0))
     return rows
-
-
-def _final(args):
-    domain, tree, episodes, seed = args
-    return evaluate(domain, tree_policy(domain, tree), episodes, seed)
 
 
 def _row(name: str, ev, tree: Optional[dict] = None) -> Row:
