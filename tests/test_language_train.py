@@ -81,3 +81,13 @@ def test_path_decoder_learns_two_simple_trees_and_outputs_valid_trees(one_thread
     for tree, probs in results:
         validate(tree, get_domain("taxi").vocab)
         assert probs and all(0.0 <= p <= 1.0 for p in probs.values())
+
+
+def test_learning_rate_decays_smoothly_from_base_to_floor():
+    from nl2policy.language.train import _cosine_lr
+
+    rates = [_cosine_lr(3e-3, step, 100) for step in range(101)]
+    assert rates[0] == pytest.approx(3e-3)
+    assert rates[-1] == pytest.approx(0.05 * 3e-3)
+    assert all(a >= b for a, b in zip(rates, rates[1:]))
+    assert _cosine_lr(3e-3, 500, 100) == pytest.approx(rates[-1])  # resuming past the end stays at the floor

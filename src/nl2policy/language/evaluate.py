@@ -142,6 +142,7 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
         lines.append(f"| {r['domain']} | {r['model']} | {r['protocol']} | {r['folds']} | {cell('tree_acc')} | "
                      f"{cell('token_acc')} | {cell('policy_acc')} | {'yes' if r['all_valid'] else 'NO'} | "
                      f"{r['train_pairs']} | {r['seconds_per_fold']} |")
+    lines += _writer_breakdown(runs)
     missing = [f"{d} {m} {p}: {want - len(table.get((d, m, p), []))} of {want} folds"
                for d, m, p, want in planned if len(table.get((d, m, p), [])) < want]
     if missing:
@@ -151,6 +152,30 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
     md.write_text("\n".join(lines) + "\n")
     _figure(rows, out / "translation.png")
     return md
+
+
+def held_out_writers(domain: str) -> dict[str, str]:
+    """Leave-writers-out fold key -> the writers it holds out (as `plan_folds` makes them)."""
+    specs = load_corpus(domain)
+    return {key: " + ".join(sorted({specs[i].writer for i in te}))
+            for key, _, te in plan_folds(specs, "writers", 1)}
+
+
+def _writer_breakdown(runs: list[dict]) -> list[str]:
+    """Tree accuracy per held-out writer pair: which writing styles a model fails to read."""
+    runs = [r for r in runs if r["protocol"] == "writers"]
+    if not runs:
+        return []
+    lines = ["", "Leave-writers-out tree accuracy (%) per held-out writer pair:", ""]
+    for domain in sorted({r["domain"] for r in runs}):
+        names = held_out_writers(domain)
+        keys = sorted(names)
+        lines += [f"| {domain} | " + " | ".join(names[k] for k in keys) + " |", "|---" * (len(keys) + 1) + "|"]
+        for model in sorted({r["model"] for r in runs if r["domain"] == domain}):
+            acc = {r["fold"]: 100 * r["tree_acc"] for r in runs if r["domain"] == domain and r["model"] == model}
+            lines.append(f"| {model} | " + " | ".join(f"{acc[k]:.0f}" if k in acc else "not run" for k in keys) + " |")
+        lines.append("")
+    return lines
 
 
 def _figure(rows: list[dict], path: Path) -> None:

@@ -55,9 +55,9 @@ class TrainedTranslator:
         sentences = split_sentences(text) or [[]]
         sentences = [s[:MAX_SENT_WORDS] for s in sentences if s] or []
         flat = [t for s in sentences for t in s]
-        mini = torch.from_numpy(self.cache.get(text, flat)) if self.cfg.minilm and flat else None
+        mini = torch.from_numpy(self.cache.get(text, flat, self.cfg.minilm_layers)) if self.cfg.minilm and flat else None
         if self.cfg.minilm and mini is None:
-            mini = torch.zeros(4, 0, 384, dtype=torch.float16)
+            mini = torch.zeros(self.cfg.minilm_layers + 1, 0, 384, dtype=torch.float16)
         return Encoded(self.words.encode(t.text for t in flat), [len(s) for s in sentences], mini)
 
     @torch.inference_mode()
@@ -223,6 +223,8 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Sequence[tuple[str, Tre
                 loss = path_loss(model.net, batch, [golds[i] for i in idx], len(names))
             else:
                 loss = model.net.loss(batch, *_targets([golds[i] for i in idx], len(names)))
+            for group in opt.param_groups:
+                group["lr"] = _cosine_lr(cfg.lr, epoch * batches_per_epoch + k, cfg.epochs * batches_per_epoch)
             opt.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(model.net.parameters(), 5.0)
@@ -235,6 +237,15 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Sequence[tuple[str, Tre
             on_epoch(epoch + 1, model, opt, rng)
     model.net.eval()
     return model
+
+
+def _cosine_lr(base: float, step: int, total: int, floor: float = 0.05) -> float:
+    """Cosine decay from `base` to `floor * base`: with a few hundred updates on a few hundred
+    pairs, a constant rate leaves the last epochs jumping between solutions (test accuracy
+    swung 75 -> 55% between epochs 20 and 30 on one fold); decaying settles the model."""
+    import math
+
+    return base * (floor + (1 - floor) * 0.5 * (1 + math.cos(math.pi * min(step, total) / max(1, total))))
 
 
 def _word_dropout(e: Encoded, rng: random.Random, p: float = 0.1) -> Encoded:

@@ -2,7 +2,8 @@
 
 Seq2Seq = flat BiGRU encoder + sequential decoder over the pre-order tree tokens;
 Seq2Tree = same encoder + binary tree decoder (each node decoded from its parent's state);
-Seq2Tree+MiniLM = Seq2Tree whose word inputs are fused with frozen MiniLM layers (ELMo-style);
+Seq2Tree+MiniLM = Seq2Tree whose word inputs are fused with frozen MiniLM layers (ELMo-style;
+all six layers for the MiniLM models: six read new writers better than three in our checks);
 HAN2Tree = hierarchical (word, sentence) attention encoder + tree decoder;
 seq2tree-minilm-synth (the default) = Seq2Tree+MiniLM trained with synthetic pairs as well.
 Configurations live in `config.py`; the network in `network.py`.

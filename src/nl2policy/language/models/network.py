@@ -17,7 +17,7 @@ from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
 
 from nl2policy.language.models.config import ModelConfig
 from nl2policy.language.models.pathnet import PathDecoder
-from nl2policy.language.models.pretrained import DIM as MINILM_DIM, LAYERS as MINILM_LAYERS
+from nl2policy.language.models.pretrained import DIM as MINILM_DIM
 
 MAX_SENT_POS = 24
 
@@ -61,7 +61,7 @@ class Translator(nn.Module):
         self.word_emb = nn.Embedding(n_words, e, padding_idx=0)
         in_dim = e
         if cfg.minilm:  # ELMo-style: softmax-weighted sum of layers, scaled by gamma
-            self.mix_logits = nn.Parameter(torch.zeros(MINILM_LAYERS + 1))
+            self.mix_logits = nn.Parameter(torch.zeros(cfg.minilm_layers + 1))
             self.mix_gamma = nn.Parameter(torch.ones(()))
             self.mini_norm = nn.LayerNorm(MINILM_DIM)  # BERT states have a few huge dimensions
             self.mini_proj = nn.Linear(MINILM_DIM, 2 * e)

