@@ -31,3 +31,28 @@ def test_summary_reports_mean_std_per_writer_pair_and_unfinished_rows(tmp_path):
     table = json.loads((tmp_path / "translation.json").read_text())
     assert {r["protocol"]: r["tree_acc"]["mean"] for r in table["rows"]} == {"cv": 60.0, "writers": 50.0}
     assert (tmp_path / "translation.png").stat().st_size > 0
+
+
+def test_experiment_never_runs_a_fold_twice(tmp_path, monkeypatch):
+    from nl2policy.language import evaluate
+
+    calls = []
+
+    def fake_fold(domain, specs, train_idx, test_idx, name, seed, cache):
+        calls.append((domain, name, tuple(test_idx)))
+        return {"n": len(test_idx), "valid": len(test_idx), "tree_acc": 0.5, "token_acc": 0.5, "policy_acc": 0.5,
+                "train_pairs": len(train_idx), "seconds": 0.0}
+
+    monkeypatch.setattr(evaluate, "run_fold", fake_fold)
+    plan = [("taxi", "m", "cv", 1), ("taxi", "m", "cv", 2)]  # cv2 holds cv1's folds: only 5 new ones
+    evaluate.run_experiment(plan, tmp_path)
+    assert len(calls) == 10 == len(set(calls))
+    evaluate.run_experiment(plan, tmp_path)  # resuming a finished experiment runs nothing
+    assert len(calls) == 10
+    assert len((tmp_path / "runs.jsonl").read_text().splitlines()) == 10
+
+
+def test_summary_counts_a_fold_recorded_twice_once(tmp_path):
+    runs = [_run("taxi", "m", "cv-r0-f0", "cv", 0.5), _run("taxi", "m", "cv-r0-f0", "cv", 0.9)]
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
+    assert "| taxi | m | cv | 1 | 50.00 (0.00) |" in summarize(tmp_path, "cmd", "budget").read_text()

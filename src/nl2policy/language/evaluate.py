@@ -104,6 +104,7 @@ def run_experiment(plan: Sequence[tuple[str, str, str, int]], out: Path,
             result.update(domain=domain, model=name, fold=key, protocol=protocol)
             with runs.open("a") as fh:
                 fh.write(json.dumps(result) + "\n")
+            done.add((domain, name, key))  # a later plan step (e.g. cv3 after cv1) must not redo it
     return runs
 
 
@@ -115,8 +116,8 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
     """Markdown + JSON tables (mean (std) over folds) and a bar figure, from runs.jsonl."""
     from nl2policy.report import provenance
 
-    runs = _read(out / "runs.jsonl")
-    table: dict = {}
+    runs = list({(r["domain"], r["model"], r["fold"]): r for r in reversed(_read(out / "runs.jsonl"))}.values())[::-1]
+    table: dict = {}  # (one row per fold: a fold run twice counts once, the first run kept)
     for r in runs:
         table.setdefault((r["domain"], r["model"], r["protocol"]), []).append(r)
     rows = []
