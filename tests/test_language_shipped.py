@@ -12,15 +12,10 @@ from nl2policy.trees.parse import validate
 
 
 @pytest.fixture
-def empty_home(tmp_path, monkeypatch):
-    import torch
-
+def empty_home(tmp_path, monkeypatch, one_torch_thread):
     monkeypatch.setenv("NL2POLICY_HOME", str(tmp_path))
     tr._LOADED.clear()
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
     yield tmp_path
-    torch.set_num_threads(threads)
     tr._LOADED.clear()
 
 

@@ -40,16 +40,7 @@ def test_augmentation_is_deterministic_and_changes_text():
     assert [tree for _, tree in a] == [specs[i // 2].tree for i in range(40)]
 
 
-@pytest.fixture
-def one_thread():
-    """One torch thread: the CI box has 2 cores, and oversubscribed threads crawl."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
-def test_tiny_training_run_learns_two_simple_trees(one_thread):
+def test_tiny_training_run_learns_two_simple_trees(one_torch_thread):
     torch.manual_seed(0)
     specs = load_corpus("taxi")
     wanted = {("has_passenger", "go_airport", "go_city"), ("heavy_traffic", "go_village", "go_city")}
@@ -63,7 +54,7 @@ def test_tiny_training_run_learns_two_simple_trees(one_thread):
     assert sum(p == s.tree for p, s in zip(preds, subset)) >= 14
 
 
-def test_path_decoder_learns_two_simple_trees_and_outputs_valid_trees(one_thread):
+def test_path_decoder_learns_two_simple_trees_and_outputs_valid_trees(one_torch_thread):
     """The path-conditioned node classifier (models/pathnet.py) trains and decodes valid trees."""
     from nl2policy.domains import get_domain
     from nl2policy.trees.parse import validate

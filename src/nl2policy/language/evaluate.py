@@ -108,6 +108,15 @@ def run_experiment(plan: Sequence[tuple[str, str, str, int]], out: Path,
     return runs
 
 
+def _one_per_fold(runs: list[dict]) -> list[dict]:
+    """The first record of each (domain, model, fold): a fold recorded twice (two processes on
+    one plan) must not count twice in a mean."""
+    first: dict[tuple, dict] = {}
+    for r in runs:
+        first.setdefault((r["domain"], r["model"], r["fold"]), r)
+    return list(first.values())
+
+
 def _read(path: Path) -> list[dict]:
     return [json.loads(l) for l in path.read_text().splitlines() if l.strip()] if path.is_file() else []
 
@@ -116,8 +125,8 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
     """Markdown + JSON tables (mean (std) over folds) and a bar figure, from runs.jsonl."""
     from nl2policy.report import provenance
 
-    runs = list({(r["domain"], r["model"], r["fold"]): r for r in reversed(_read(out / "runs.jsonl"))}.values())[::-1]
-    table: dict = {}  # (one row per fold: a fold run twice counts once, the first run kept)
+    runs = _one_per_fold(_read(out / "runs.jsonl"))
+    table: dict = {}
     for r in runs:
         table.setdefault((r["domain"], r["model"], r["protocol"]), []).append(r)
     rows = []

@@ -7,6 +7,7 @@ valid tree, and returns each node's probability for the confidence score.
 
 from __future__ import annotations
 
+import math
 import random
 from dataclasses import dataclass, field
 from typing import Callable, Optional, Sequence
@@ -19,7 +20,7 @@ from nl2policy.language.grammar import allowed_tokens, next_slot
 from nl2policy.language.models.config import ModelConfig
 from nl2policy.language.models.network import Batch, Translator
 from nl2policy.language.models.pathnet import decode_paths, tree_nodes
-from nl2policy.language.models.pretrained import MiniLMCache
+from nl2policy.language.models.pretrained import DIM as MINILM_DIM, MiniLMCache
 from nl2policy.language.text import WordVocab, split_sentences
 from nl2policy.trees import Tree, from_tokens, to_tokens
 
@@ -57,7 +58,7 @@ class TrainedTranslator:
         flat = [t for s in sentences for t in s]
         mini = torch.from_numpy(self.cache.get(text, flat, self.cfg.minilm_layers)) if self.cfg.minilm and flat else None
         if self.cfg.minilm and mini is None:
-            mini = torch.zeros(self.cfg.minilm_layers + 1, 0, 384, dtype=torch.float16)
+            mini = torch.zeros(self.cfg.minilm_layers + 1, 0, MINILM_DIM, dtype=torch.float16)
         return Encoded(self.words.encode(t.text for t in flat), [len(s) for s in sentences], mini)
 
     @torch.inference_mode()
@@ -243,8 +244,6 @@ def _cosine_lr(base: float, step: int, total: int, floor: float = 0.05) -> float
     """Cosine decay from `base` to `floor * base`: with a few hundred updates on a few hundred
     pairs, a constant rate leaves the last epochs jumping between solutions (test accuracy
     swung 75 -> 55% between epochs 20 and 30 on one fold); decaying settles the model."""
-    import math
-
     return base * (floor + (1 - floor) * 0.5 * (1 + math.cos(math.pi * min(step, total) / max(1, total))))
 
 
