@@ -57,7 +57,7 @@ def test_untrained_models_output_valid_trees_for_every_description(name):
     vocab = get_domain(domain).vocab
     words = WordVocab.build([s.description for s in specs])
     net = Translator(MODELS[name], len(words), len(vocab.question_ids) + len(vocab.action_ids))
-    model = TrainedTranslator(domain, name, MODELS[name], words, net)
+    model = TrainedTranslator(domain, name, MODELS[name], words, [net])
     texts = [s.description for s in specs] if name != "seq2tree-minilm" else [s.description for s in specs[::10]]
     outputs = model.predict(texts)
     assert len(outputs) == len(texts)

@@ -56,3 +56,27 @@ def test_summary_counts_a_fold_recorded_twice_once(tmp_path):
     runs = [_run("taxi", "m", "cv-r0-f0", "cv", 0.5), _run("taxi", "m", "cv-r0-f0", "cv", 0.9)]
     (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
     assert "| taxi | m | cv | 1 | 50.00 (0.00) |" in summarize(tmp_path, "cmd", "budget").read_text()
+
+
+def test_summary_pools_confidence_calibration_over_folds(tmp_path):
+    a = dict(_run("taxi", "m", "cv-r0-f0", "cv", 0.5), n=10, confident=6, confident_right=5, unsure_right=0)
+    b = dict(_run("taxi", "m", "cv-r0-f1", "cv", 0.5), n=10, confident=4, confident_right=3, unsure_right=2)
+    (tmp_path / "runs.jsonl").write_text(json.dumps(a) + "\n" + json.dumps(b) + "\n")
+    md = summarize(tmp_path, "cmd", "budget").read_text()
+    assert "| taxi | m | cv | 50.0 | 80.0 | 20.0 |" in md  # 10 of 20 confident, 8/10 right; 2/10 unsure right
+
+
+def test_fold_result_counts_confident_and_unsure_translations(monkeypatch, one_torch_thread):
+    import dataclasses
+
+    from nl2policy.language import evaluate
+    from nl2policy.language.corpus import load_corpus
+    from nl2policy.language.models.config import MODELS
+    from nl2policy.language.models.pretrained import MiniLMCache
+
+    monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=2))
+    specs = load_corpus("taxi")[:40]
+    r = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
+    assert 0 <= r["confident"] <= r["n"] == 10
+    assert r["confident_right"] + r["unsure_right"] == round(r["tree_acc"] * 10)
+    assert r["confident_right"] <= r["confident"]

@@ -1,5 +1,6 @@
 """Training folds only see training data, and a tiny run learns simple trees."""
 
+import copy
 import dataclasses
 
 import pytest
@@ -82,3 +83,102 @@ def test_learning_rate_decays_smoothly_from_base_to_floor():
     assert rates[-1] == pytest.approx(0.05 * 3e-3)
     assert all(a >= b for a, b in zip(rates, rates[1:]))
     assert _cosine_lr(3e-3, 500, 100) == pytest.approx(rates[-1])  # resuming past the end stays at the floor
+
+
+def test_length_batches_cover_every_item_once_and_group_similar_lengths():
+    import random
+
+    from nl2policy.language.train import _length_batches
+
+    lengths = [random.Random(1).randint(5, 300) for _ in range(1000)]
+    batches = _length_batches(lengths, 32, random.Random(0))
+    assert sorted(i for b in batches for i in b) == list(range(1000))
+    spread = sum(max(lengths[i] for i in b) - min(lengths[i] for i in b) for b in batches) / len(batches)
+    assert spread < 60  # random batches of 32 from 5..300 spread over ~270
+    assert _length_batches(lengths, 32, random.Random(0)) == batches
+
+
+def test_ensemble_averages_members_and_resumes_from_a_checkpoint(one_torch_thread):
+    """Two members: decoding averages them; a run stopped after the first member's last
+    epoch resumes to the same networks as an uninterrupted run."""
+    specs = load_corpus("taxi")
+    wanted = {("has_passenger", "go_airport", "go_city"), ("heavy_traffic", "go_village", "go_city")}
+    subset = [s for s in specs if tuple(to_tokens(s.tree)) in wanted]
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=12, batch=8, lr=1e-2, ensemble=2)
+    pairs = [(s.description, s.tree) for s in subset]
+    checkpoints = []  # what a checkpoint file would hold: a snapshot at that epoch
+    full = fit("taxi", "ens", cfg, pairs, seed=0, on_epoch=lambda c: checkpoints.append(copy.deepcopy(c)))
+    assert len(full.nets) == 2 and len(checkpoints) == 24
+    assert [c["member"] for c in checkpoints] == [0] * 12 + [1] * 12
+    assert [len(c["finished"]) for c in checkpoints] == [0] * 12 + [1] * 12
+    a, b = (list(n.parameters())[-1] for n in full.nets)
+    assert not torch.equal(a, b)  # different seeds, different members
+    resumed = fit("taxi", "ens", cfg, pairs, seed=0, state=checkpoints[15])  # member 1 after epoch 4
+    for n1, n2 in zip(full.nets, resumed.nets):
+        for p1, p2 in zip(n1.parameters(), n2.parameters()):
+            assert torch.allclose(p1, p2)
+    from nl2policy.domains import get_domain
+    from nl2policy.language.grammar import allowed_tokens, next_slot
+    from nl2policy.language.train import collate
+
+    texts = [s.description for s in subset[:8]]
+    vocab = get_domain("taxi").vocab
+    root_ok = torch.tensor([t in allowed_tokens(next_slot([], vocab), vocab) for t in full.tree_tokens])
+    with torch.inference_mode():
+        batch = collate([full.encode(t) for t in texts])
+        root = []  # each member's distribution over the root's allowed tokens
+        for net in full.nets:
+            memory = net.encode(batch)
+            B = len(texts)
+            _, _, logits = net.run_step(memory, [memory["h0"]], [torch.zeros(B, net.out.in_features - cfg.hidden)],
+                                        [torch.full((B,), net.start_id)], torch.full((B,), -1), torch.zeros(B, dtype=torch.long))
+            root.append(torch.softmax(logits.masked_fill(~root_ok, -1e9), -1))
+    mean = (root[0] + root[1]) / 2
+    for i, (tree, probs) in enumerate(full.predict(texts)):
+        token = to_tokens(tree)[0]
+        assert token == full.tree_tokens[int(mean[i].argmax())]  # the ensemble picks the averaged argmax
+        assert probs[0] == pytest.approx(float(mean[i].max()), abs=1e-5)
+
+
+def test_training_is_reproducible_from_the_seed(one_torch_thread):
+    specs = load_corpus("taxi")[:24]
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=2)
+    pairs = [(s.description, s.tree) for s in specs]
+    a = fit("taxi", "r", cfg, pairs, seed=3)
+    torch.rand(5)  # unrelated draws from the global generator must not matter
+    b = fit("taxi", "r", cfg, pairs, seed=3)
+    for p1, p2 in zip(a.net.parameters(), b.net.parameters()):
+        assert torch.equal(p1, p2)
+
+
+@pytest.mark.parametrize("name", ["seq2tree", "seq2seq"])
+def test_stacked_decoder_step_equals_each_members_own_step(name, one_torch_thread):
+    from nl2policy.language.models.network import StackedDecoder, Translator
+
+    torch.manual_seed(0)
+    cfg = dataclasses.replace(MODELS[name], hidden=24, embed=12)
+    nets = [Translator(cfg, 30, 10, 6).eval() for _ in range(3)]
+    B, N, h, mem = 4, 7, 24, 48
+    words, mask = torch.randn(3, B, N, mem), torch.rand(B, N) > 0.3
+    mask[:, 0] = True
+    h_prev, ctx_prev, h_parent = torch.randn(3, B, h), torch.randn(3, B, mem), torch.randn(3, B, h)
+    prev_tok, parent_tok, branch = torch.tensor([10, 2, 3, 4]), torch.tensor([10, 10, 1, 2]), torch.tensor([0, 1, 2, 1])
+    with torch.inference_mode():
+        got = StackedDecoder(nets).step(words, mask, h_prev, ctx_prev, prev_tok, h_parent, parent_tok, branch)
+        for e, net in enumerate(nets):
+            want = net.step({"words": words[e], "mask": mask}, h_prev[e], ctx_prev[e], prev_tok, h_parent[e], parent_tok, branch)
+            for g, w in zip(got, want):
+                assert torch.allclose(g[e], w, atol=1e-5)
+
+
+def test_stacked_and_member_by_member_decoding_give_the_same_translations(one_torch_thread):
+    specs = load_corpus("highway")
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, ensemble=3)
+    model = fit("highway", "ens", cfg, [(s.description, s.tree) for s in specs[:48]], seed=0)
+    texts = [s.description for s in specs[48:80]]
+    stacked = model.predict(texts)
+    model.stack_members = False
+    looped = model.predict(texts)
+    assert [t for t, _ in stacked] == [t for t, _ in looped]
+    for (_, a), (_, b) in zip(stacked, looped):
+        assert a.keys() == b.keys() and all(abs(a[k] - b[k]) < 1e-5 for k in a)

@@ -27,6 +27,7 @@ class RunManager:
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._active: dict[str, subprocess.Popen] = {}
+        self._watchers: list[threading.Thread] = []
         self._stopping = False
         self._thread = threading.Thread(target=self._loop, name="run-manager", daemon=True)
 
@@ -42,6 +43,8 @@ class RunManager:
         for proc in procs:  # the run's checkpoint lets it resume after the restart
             proc.terminate()
         self._thread.join(timeout=10)
+        for watcher in self._watchers:  # record "interrupted" now: a late write would hit a resumed run
+            watcher.join(timeout=10)
 
     def submit(self, run_id: str) -> None:
         """Queue a run (new, or interrupted and being resumed)."""
@@ -60,7 +63,9 @@ class RunManager:
                 self.store.set_run_status(run["id"], "running")
                 proc = self._launch(run)
                 self._active[run["id"]] = proc
-            threading.Thread(target=self._watch, args=(run, proc), daemon=True).start()
+            watcher = threading.Thread(target=self._watch, args=(run, proc), daemon=True)
+            self._watchers = [w for w in self._watchers if w.is_alive()] + [watcher]
+            watcher.start()
 
     def _next_queued(self) -> Optional[dict]:
         queued = self.store.list_runs(status="queued", limit=1)

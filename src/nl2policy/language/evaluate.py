@@ -9,6 +9,7 @@ stopped; `summarize` turns the runs into the Markdown/JSON tables and the figure
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 from statistics import mean, pstdev
@@ -23,6 +24,7 @@ from nl2policy.language.models.config import MODELS
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.synthetic import synthetic_pairs
 from nl2policy.language.train import fit
+from nl2policy.language.translate import LOW_CONFIDENCE
 from nl2policy.trees import GRID_SLOTS, Tree, TreeError, to_grid
 from nl2policy.trees.parse import validate
 
@@ -36,7 +38,7 @@ def fold_training_pairs(domain: str, specs: Sequence[Spec], train_idx: Sequence[
     pairs = [(specs[i].description, specs[i].tree) for i in train_idx]
     pairs += augment_fold(specs, train_idx, cfg.aug_copies, seed)
     if cfg.synthetic:
-        pairs += synthetic_pairs(domain, cfg.synthetic, seed, [specs[i].tree for i in train_idx])
+        pairs += synthetic_pairs(domain, cfg.synthetic, seed, [specs[i].tree for i in train_idx], cfg.synth_per_tree)
     return pairs
 
 
@@ -69,8 +71,16 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     pairs = fold_training_pairs(domain, specs, train_idx, name)
     model = fit(domain, name, MODELS[name], pairs, seed, cache=cache,
                 vocab_texts=[specs[i].description for i in train_idx])
-    preds = [t for t, _ in model.predict([specs[i].description for i in test_idx])]
-    result = score(domain, preds, [specs[i].tree for i in test_idx])
+    decoded = model.predict([specs[i].description for i in test_idx])
+    preds = [t for t, _ in decoded]
+    golds = [specs[i].tree for i in test_idx]
+    result = score(domain, preds, golds)
+    # calibration: is "confident" (the product of node probabilities, what translate() reports
+    # for an on-topic text, at or above its warning threshold) more often right than "unsure"?
+    sure = [math.prod(probs.values()) >= LOW_CONFIDENCE for _, probs in decoded]
+    right = [p == g for p, g in zip(preds, golds)]
+    result.update(confident=sum(sure), confident_right=sum(s and r for s, r in zip(sure, right)),
+                  unsure_right=sum(r and not s for s, r in zip(sure, right)))
     result.update(train_pairs=len(pairs), seconds=round(time.time() - start, 1))
     return result
 
@@ -153,6 +163,7 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
                      f"{cell('token_acc')} | {cell('policy_acc')} | {'yes' if r['all_valid'] else 'NO'} | "
                      f"{r['train_pairs']} | {r['seconds_per_fold']} |")
     lines += _writer_breakdown(runs)
+    lines += _calibration(runs)
     missing = [f"{d} {m} {p}: {want - len(table.get((d, m, p), []))} of {want} folds"
                for d, m, p, want in planned if len(table.get((d, m, p), [])) < want]
     if missing:
@@ -185,6 +196,26 @@ def _writer_breakdown(runs: list[dict]) -> list[str]:
             acc = {r["fold"]: 100 * r["tree_acc"] for r in runs if r["domain"] == domain and r["model"] == model}
             lines.append(f"| {model} | " + " | ".join(f"{acc[k]:.0f}" if k in acc else "not run" for k in keys) + " |")
         lines.append("")
+    return lines
+
+
+def _calibration(runs: list[dict]) -> list[str]:
+    """Pooled over folds: how many translations are confident, and how often each kind is right.
+    A useful confidence makes the confident ones right far more often than the unsure ones."""
+    runs = [r for r in runs if "confident" in r]
+    if not runs:
+        return []
+    lines = ["", f"Confidence (test descriptions pooled over folds; confident = node-probability product >= {LOW_CONFIDENCE}):", "",
+             "| domain | model | protocol | confident share | tree acc when confident | tree acc when unsure |",
+             "|---|---|---|---:|---:|---:|"]
+    groups: dict = {}
+    for r in runs:
+        groups.setdefault((r["domain"], r["model"], r["protocol"]), []).append(r)
+    pct = lambda a, b: f"{100 * a / b:.1f}" if b else "-"
+    for (domain, model, protocol), rs in sorted(groups.items()):
+        n, sure = sum(r["n"] for r in rs), sum(r["confident"] for r in rs)
+        lines.append(f"| {domain} | {model} | {protocol} | {pct(sure, n)} | {pct(sum(r['confident_right'] for r in rs), sure)} | "
+                     f"{pct(sum(r['unsure_right'] for r in rs), n - sure)} |")
     return lines
 
 

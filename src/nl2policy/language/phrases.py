@@ -101,3 +101,32 @@ FILLER = [
     "Repeat this all the time.", "Hope that makes sense!", "My cousin drives like this too.", "Anyway.",
     "I tried to keep it short.", "Good luck out there.",
 ]
+
+REASONS: dict[str, dict[str, list[str]]] = {
+    "taxi": {
+        "go_airport": ["that's where the fare gets paid", "every passenger wants to go there", "the money is at the airport",
+                       "dropping them off earns the fare"],
+        "go_village": ["the village never has traffic", "the road there is always quick", "someone may turn up there soon"],
+        "go_city": ["there are always people waiting there", "the city is never short of passengers", "a fare is guaranteed there"],
+        "wait": ["someone will show up soon", "driving off would waste time", "it saves a pointless trip"],
+    },
+    "highway": {
+        "lane_left": ["it gets me around the slow car", "there is more room over there", "passing beats sitting behind someone"],
+        "lane_right": ["keeping right is rewarded", "the right-hand lanes pay more", "that's where the bonus is"],
+        "faster": ["going fast earns more", "speed is rewarded", "the road lets me"],
+        "slower": ["a crash costs far more than speed earns", "hitting the car in front is the worst outcome", "safety comes first"],
+        "idle": ["everything is fine as it is", "there's no need to change anything", "nothing needs fixing"],
+    },
+}
+"""Why-clauses writers tack onto actions ("drive to the city, because ..."); they carry no policy."""
+
+ASIDES = [
+    "I don't look at {q} at all.", "{Q} plays no part in this plan.", "I thought about {q} but left it out.",
+    "I never bother checking {q}.", "I ignore {q} here.", "Forget about {q}, it doesn't matter.",
+]
+"""Sentences about a question the tree does *not* ask: long descriptions mention what was left out."""
+
+UNUSED_ACTIONS = ["I never {a} in this plan.", "There's no reason to {a} here.", "It doesn't ever {a}."]
+
+SUMMARIES = ["In short: ", "So to sum up: ", "To repeat it simply: ", "Basically: ", "Put simply, "]
+"""Lead-ins to a second, compressed pass over the policy (explainers restate their plan)."""

@@ -1,8 +1,9 @@
 """Turning (description, tree) pairs into tensors, the training loop, and constrained decoding.
 
-`fit` is the whole training loop in plain view (Adam, teacher forcing, a few epochs);
-`TrainedTranslator.predict` decodes greedily under the grammar mask, so every output is a
-valid tree, and returns each node's probability for the confidence score.
+`fit` is the whole training loop in plain view (Adam, teacher forcing, a few epochs), run
+once per member of a small ensemble; `TrainedTranslator.predict` decodes greedily under the
+grammar mask with the members' probabilities averaged, so every output is a valid tree, and
+returns each node's probability for the confidence score.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import torch
 from nl2policy.domains import get_domain
 from nl2policy.language.grammar import allowed_tokens, next_slot
 from nl2policy.language.models.config import ModelConfig
-from nl2policy.language.models.network import Batch, Translator
+from nl2policy.language.models.network import Batch, StackedDecoder, Translator
 from nl2policy.language.models.pathnet import decode_paths, tree_nodes
 from nl2policy.language.models.pretrained import DIM as MINILM_DIM, MiniLMCache
 from nl2policy.language.text import WordVocab, split_sentences
@@ -43,9 +44,19 @@ class TrainedTranslator:
     name: str
     cfg: ModelConfig
     words: WordVocab
-    net: Translator
+    nets: list[Translator]  # an ensemble: decoding averages their step probabilities
     cache: MiniLMCache = field(default_factory=MiniLMCache, repr=False)
     history: list[float] = field(default_factory=list, repr=False)  # mean training loss per epoch
+    stack_members: bool = True  # flat encoders: decode all members as one batch (False: one by one, same result)
+
+    @property
+    def net(self) -> Translator:
+        """The first network (the only one unless the config asks for an ensemble)."""
+        return self.nets[0]
+
+    def new_net(self) -> Translator:
+        vocab = get_domain(self.domain).vocab
+        return Translator(self.cfg, len(self.words), len(self.tree_tokens), len(vocab.question_ids))
 
     @property
     def tree_tokens(self) -> list[str]:
@@ -64,7 +75,8 @@ class TrainedTranslator:
     @torch.inference_mode()
     def predict(self, texts: Sequence[str], batch_size: int = 64) -> list[tuple[Tree, dict[int, float]]]:
         """Greedy grammar-constrained decoding. Returns (tree, {grid slot: probability})."""
-        self.net.eval()
+        for net in self.nets:
+            net.eval()
         out = []
         decode = self._decode_paths if self.cfg.decoder == "path" else self._decode
         for i in range(0, len(texts), batch_size):
@@ -81,12 +93,10 @@ class TrainedTranslator:
         vocab = get_domain(self.domain).vocab
         names = self.tree_tokens
         index = {t: i for i, t in enumerate(names)}
-        memory = self.net.encode(collate(items))
         B = len(items)
         prefixes: list[list[str]] = [[] for _ in range(B)]
         probs: list[dict[int, float]] = [{} for _ in range(B)]
-        hs, toks = [memory["h0"]], [torch.full((B,), self.net.start_id, dtype=torch.long)]
-        ctxs = [torch.zeros(B, self.net.out.in_features - self.cfg.hidden)]
+        step = self._stepper(collate(items), B)
         for t in range(MAX_STEPS):
             slots = [next_slot(p, vocab) for p in prefixes]
             if all(s is None for s in slots):
@@ -100,17 +110,51 @@ class TrainedTranslator:
                     continue
                 mask[b, [index[a] for a in allowed_tokens(s, vocab)]] = True
                 parent[b], branch[b] = s.parent, s.branch
-            h, ctx, logits = self.net.run_step(memory, hs, ctxs, toks, parent, branch)
-            p = torch.softmax(logits.masked_fill(~mask, -1e9), -1)
+            logits = step(parent, branch)  # (members, B, tokens)
+            p = torch.softmax(logits.masked_fill(~mask, -1e9), -1).mean(0)
             choice = p.argmax(-1)
             for b, s in enumerate(slots):
                 if s is not None:
                     prefixes[b].append(names[choice[b]])
                     probs[b][s.grid] = float(p[b, choice[b]])
-            hs.append(h)
-            ctxs.append(ctx)
-            toks.append(choice)
+            step.tokens.append(choice)
         return [(from_tokens(pre, vocab), pr) for pre, pr in zip(prefixes, probs)]
+
+    def _stepper(self, batch: Batch, B: int) -> Callable:
+        """step(parent, branch) -> every member's logits (E, B, V) for the next slot; it reads
+        the tokens chosen so far from step.tokens (tokens[0] = start) and keeps the states.
+        Flat encoders run all members at once (StackedDecoder); the hierarchical one (or any, with
+        stack_members off), member by member."""
+        memories = [net.encode(batch) for net in self.nets]
+        rows = torch.arange(B)
+        tokens = [torch.full((B,), self.net.start_id, dtype=torch.long)]
+        ctx0 = torch.zeros(B, self.net.out.in_features - self.cfg.hidden)
+        if self.cfg.encoder == "flat" and self.stack_members:
+            stacked = StackedDecoder(self.nets)
+            words, mask = torch.stack([m["words"] for m in memories]), memories[0]["mask"]
+            hs, ctxs = [torch.stack([m["h0"] for m in memories])], [ctx0.expand(len(self.nets), -1, -1)]
+
+            def step(parent: torch.Tensor, branch: torch.Tensor) -> torch.Tensor:
+                src = parent + 1  # the root's parent is the start state
+                h_parent = torch.stack(hs, 2)[:, rows, src]
+                h, ctx, logits = stacked.step(words, mask, hs[-1], ctxs[-1], tokens[-1], h_parent,
+                                              torch.stack(tokens, 1)[rows, src], branch)
+                hs.append(h)
+                ctxs.append(ctx)
+                return logits
+        else:
+            runs = [(m, [m["h0"]], [ctx0]) for m in memories]
+
+            def step(parent: torch.Tensor, branch: torch.Tensor) -> torch.Tensor:
+                out = []
+                for net, (memory, hs, ctxs) in zip(self.nets, runs):
+                    h, ctx, logits = net.run_step(memory, hs, ctxs, tokens, parent, branch)
+                    hs.append(h)
+                    ctxs.append(ctx)
+                    out.append(logits)
+                return torch.stack(out)
+        step.tokens = tokens
+        return step
 
 
 def _preorder_slots(tree: Tree, slot: int = 0) -> list[int]:
@@ -189,55 +233,92 @@ def _targets(golds: list, n_names: int) -> tuple[torch.Tensor, ...]:
 def fit(domain: str, name: str, cfg: ModelConfig, pairs: Sequence[tuple[str, Tree]], seed: int = 0,
         cache: Optional[MiniLMCache] = None, progress: Optional[Callable[[int, int], None]] = None,
         vocab_texts: Optional[Sequence[str]] = None, state: Optional[dict] = None,
-        on_epoch: Optional[Callable[[int, "TrainedTranslator", torch.optim.Optimizer], None]] = None) -> TrainedTranslator:
-    """Train a translator on (description, tree) pairs. The word vocabulary comes from
-    `vocab_texts` (the real training descriptions) or the pairs; `state` resumes a checkpoint."""
-    torch.manual_seed(seed)
-    rng = random.Random(seed)
+        on_epoch: Optional[Callable[[dict], None]] = None) -> TrainedTranslator:
+    """Train a translator on (description, tree) pairs: `cfg.ensemble` networks, one after the
+    other, with seeds seed, seed+1, ... The word vocabulary comes from `vocab_texts` (the real
+    training descriptions) or the pairs. After every epoch `on_epoch` gets a checkpoint dict;
+    passing one back as `state` resumes there."""
     words = WordVocab.build(vocab_texts if vocab_texts is not None else [t for t, _ in pairs])
     vocab = get_domain(domain).vocab
     names = vocab.question_ids + vocab.action_ids
-    net = Translator(cfg, len(words), len(names), len(vocab.question_ids))
-    model = TrainedTranslator(domain, name, cfg, words, net, cache or MiniLMCache())
-    opt = torch.optim.Adam(model.net.parameters(), lr=cfg.lr)
-    start_epoch = 0
-    if state is not None:
-        model.net.load_state_dict(state["net"])
-        opt.load_state_dict(state["opt"])
-        start_epoch = state["epoch"]
-        rng.setstate(state["rng"])
+    model = TrainedTranslator(domain, name, cfg, words, [], cache or MiniLMCache())
     encoded = [model.encode(t) for t, _ in pairs]
     if cfg.decoder == "path":
         golds = [tree_nodes(tree, names, vocab.question_ids) for _, tree in pairs]
     else:
         golds = [gold_steps(tree, domain, names) for _, tree in pairs]
-    order = list(range(len(pairs)))
-    batches_per_epoch = (len(order) + cfg.batch - 1) // cfg.batch
+    finished = list(state["finished"]) if state else []
+    for member in range(cfg.ensemble):
+        torch.manual_seed(seed + member)  # the initial weights: a member is reproducible from its seed
+        net = model.new_net()
+        if member < len(finished):
+            net.load_state_dict(finished[member])
+        else:
+            resume = state if state is not None and state["member"] == member else None
+
+            def checkpoint(epoch: int, opt: torch.optim.Optimizer, rng: random.Random, member: int = member) -> None:
+                if on_epoch:
+                    on_epoch({"member": member, "finished": list(finished), "epoch": epoch, "net": net.state_dict(),
+                              "opt": opt.state_dict(), "rng": rng.getstate(), "torch_rng": torch.get_rng_state()})
+
+            _fit_member(model, net, encoded, golds, len(names), seed + member, resume, checkpoint,
+                        None if progress is None else lambda done, total, m=member: progress(m * total + done, cfg.ensemble * total))
+            finished.append(net.state_dict())
+        net.eval()
+        model.nets.append(net)
+    return model
+
+
+def _fit_member(model: "TrainedTranslator", net: Translator, encoded: list[Encoded], golds: list, n_names: int, seed: int,
+                state: Optional[dict], checkpoint: Callable, progress: Optional[Callable[[int, int], None]]) -> None:
+    """The training loop of one network: Adam, teacher forcing, cosine learning rate, batches
+    of descriptions of similar length (padding is most of the cost otherwise)."""
+    cfg = model.cfg
+    rng = random.Random(seed)
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
+    start_epoch = 0
+    if state is not None:
+        net.load_state_dict(state["net"])
+        opt.load_state_dict(state["opt"])
+        start_epoch = state["epoch"]
+        rng.setstate(state["rng"])
+        if "torch_rng" in state:  # dropout masks continue as if never stopped
+            torch.set_rng_state(state["torch_rng"])
+    n_batches = (len(encoded) + cfg.batch - 1) // cfg.batch
     for epoch in range(start_epoch, cfg.epochs):
-        model.net.train()
-        rng.shuffle(order)
+        net.train()
         losses = []
-        for k in range(batches_per_epoch):
-            idx = order[k * cfg.batch:(k + 1) * cfg.batch]
+        for k, idx in enumerate(_length_batches([len(e.ids) for e in encoded], cfg.batch, rng)):
             batch = collate([_word_dropout(encoded[i], rng) for i in idx])
             if cfg.decoder == "path":
-                loss = path_loss(model.net, batch, [golds[i] for i in idx], len(names))
+                loss = path_loss(net, batch, [golds[i] for i in idx], n_names)
             else:
-                loss = model.net.loss(batch, *_targets([golds[i] for i in idx], len(names)))
+                loss = net.loss(batch, *_targets([golds[i] for i in idx], n_names))
             for group in opt.param_groups:
-                group["lr"] = _cosine_lr(cfg.lr, epoch * batches_per_epoch + k, cfg.epochs * batches_per_epoch)
+                group["lr"] = _cosine_lr(cfg.lr, epoch * n_batches + k, cfg.epochs * n_batches)
             opt.zero_grad()
             loss.backward()
-            torch.nn.utils.clip_grad_norm_(model.net.parameters(), 5.0)
+            torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
             opt.step()
             losses.append(loss.item())
             if progress:
-                progress(epoch * batches_per_epoch + k + 1, cfg.epochs * batches_per_epoch)
+                progress(epoch * n_batches + k + 1, cfg.epochs * n_batches)
         model.history.append(sum(losses) / len(losses))
-        if on_epoch:
-            on_epoch(epoch + 1, model, opt, rng)
-    model.net.eval()
-    return model
+        checkpoint(epoch + 1, opt, rng)
+
+
+def _length_batches(lengths: Sequence[int], size: int, rng: random.Random, pool: int = 8) -> list[list[int]]:
+    """Shuffled batches whose members have similar lengths: shuffle, sort within pools of
+    `pool` batches, cut, shuffle the batches. A code snippet padded to an explainer's 250
+    words costs as much as the explainer; this keeps most batches tight."""
+    order = list(range(len(lengths)))
+    rng.shuffle(order)
+    batches = []
+    for p in range(0, len(order), size * pool):
+        chunk = sorted(order[p:p + size * pool], key=lambda i: lengths[i])
+        batches += [chunk[i:i + size] for i in range(0, len(chunk), size)]
+    rng.shuffle(batches)
+    return batches
 
 
 def _cosine_lr(base: float, step: int, total: int, floor: float = 0.05) -> float:

@@ -21,7 +21,6 @@ import torch
 from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS, ModelConfig
-from nl2policy.language.models.network import Translator
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.text import WordVocab, tokenize
 from nl2policy.language.train import TrainedTranslator, fit
@@ -80,7 +79,7 @@ def training_pairs(domain: str, cfg: ModelConfig, seed: int = 0) -> tuple[list, 
     idx = list(range(len(specs)))
     pairs = [(s.description, s.tree) for s in specs] + augment_fold(specs, idx, cfg.aug_copies, seed)
     if cfg.synthetic:
-        pairs += synthetic_pairs(domain, cfg.synthetic, seed, [s.tree for s in specs])
+        pairs += synthetic_pairs(domain, cfg.synthetic, seed, [s.tree for s in specs], cfg.synth_per_tree)
     return pairs, [s.description for s in specs]
 
 
@@ -99,15 +98,15 @@ def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
     state = torch.load(ckpt, weights_only=False) if ckpt.is_file() else None
     pairs, vocab_texts = training_pairs(domain, cfg, seed)
 
-    def save_checkpoint(epoch: int, model: TrainedTranslator, opt, rng) -> None:
+    def save_checkpoint(checkpoint: dict) -> None:
         tmp = ckpt.with_suffix(".tmp")
-        torch.save({"epoch": epoch, "net": model.net.state_dict(), "opt": opt.state_dict(), "rng": rng.getstate()}, tmp)
+        torch.save(checkpoint, tmp)
         tmp.replace(ckpt)
 
     model = fit(domain, name, cfg, pairs, seed, progress=progress, vocab_texts=vocab_texts, state=state, on_epoch=save_checkpoint)
     tmp = path.with_suffix(".tmp")
     torch.save({"domain": domain, "name": name, "cfg": cfg.to_dict(), "words": model.words.itos[2:],
-                "net": model.net.state_dict(), "lexicon": topic_lexicon(domain)}, tmp)
+                "nets": [net.state_dict() for net in model.nets], "lexicon": topic_lexicon(domain)}, tmp)
     tmp.replace(path)
     ckpt.unlink(missing_ok=True)
     return path
@@ -136,13 +135,12 @@ class LoadedModel:
 def load_model(path: Path) -> LoadedModel:
     data = torch.load(path, weights_only=False)
     cfg = ModelConfig(**data["cfg"])
-    words = WordVocab(data["words"])
-    vocab = get_domain(data["domain"]).vocab
-    net = Translator(cfg, len(words), len(vocab.question_ids) + len(vocab.action_ids), len(vocab.question_ids))
-    net.load_state_dict(data["net"])
-    net.eval()
-    return LoadedModel(TrainedTranslator(data["domain"], data["name"], cfg, words, net, MiniLMCache(max_items=256)),
-                       {d: set(ws) for d, ws in data["lexicon"].items()})
+    translator = TrainedTranslator(data["domain"], data["name"], cfg, WordVocab(data["words"]), [], MiniLMCache(max_items=256))
+    for state in data["nets"] if "nets" in data else [data["net"]]:  # "net": files from before ensembles
+        net = translator.new_net()
+        net.load_state_dict(state)
+        translator.nets.append(net.eval())
+    return LoadedModel(translator, {d: set(ws) for d, ws in data["lexicon"].items()})
 
 
 _LOADED: dict[tuple[str, str], LoadedModel] = {}

@@ -5,7 +5,8 @@ Seq2Tree = same encoder + binary tree decoder (each node decoded from its parent
 Seq2Tree+MiniLM = Seq2Tree whose word inputs are fused with frozen MiniLM layers (ELMo-style;
 all six layers for the MiniLM models: six read new writers better than three in our checks);
 HAN2Tree = hierarchical (word, sentence) attention encoder + tree decoder;
-seq2tree-minilm-synth (the default) = Seq2Tree+MiniLM trained with synthetic pairs as well.
+seq2tree-minilm-synth = Seq2Tree+MiniLM trained with synthetic pairs as well;
+seq2tree-minilm-synth-x3 (the default) = an ensemble of three of those (decoding averages their steps).
 Configurations live in `config.py`; the network in `network.py`.
 """
 
