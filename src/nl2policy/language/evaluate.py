@@ -9,7 +9,6 @@ stopped; `summarize` turns the runs into the Markdown/JSON tables and the figure
 from __future__ import annotations
 
 import json
-import math
 import time
 from pathlib import Path
 from statistics import mean, pstdev
@@ -24,7 +23,7 @@ from nl2policy.language.models.config import MODELS
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.synthetic import synthetic_pairs
 from nl2policy.language.train import fit
-from nl2policy.language.translate import LOW_CONFIDENCE
+from nl2policy.language.translate import LOW_CONFIDENCE, tree_probability
 from nl2policy.trees import GRID_SLOTS, Tree, TreeError, to_grid
 from nl2policy.trees.parse import validate
 
@@ -77,7 +76,7 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     result = score(domain, preds, golds)
     # calibration: is "confident" (the product of node probabilities, what translate() reports
     # for an on-topic text, at or above its warning threshold) more often right than "unsure"?
-    sure = [math.prod(probs.values()) >= LOW_CONFIDENCE for _, probs in decoded]
+    sure = [tree_probability(probs) >= LOW_CONFIDENCE for _, probs in decoded]
     right = [p == g for p, g in zip(preds, golds)]
     result.update(confident=sum(sure), confident_right=sum(s and r for s, r in zip(sure, right)),
                   unsure_right=sum(r and not s for s, r in zip(sure, right)))

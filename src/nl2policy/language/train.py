@@ -285,10 +285,11 @@ def _fit_member(model: "TrainedTranslator", net: Translator, encoded: list[Encod
         if "torch_rng" in state:  # dropout masks continue as if never stopped
             torch.set_rng_state(state["torch_rng"])
     n_batches = (len(encoded) + cfg.batch - 1) // cfg.batch
+    lengths = [len(e.ids) for e in encoded]
     for epoch in range(start_epoch, cfg.epochs):
         net.train()
         losses = []
-        for k, idx in enumerate(_length_batches([len(e.ids) for e in encoded], cfg.batch, rng)):
+        for k, idx in enumerate(_length_batches(lengths, cfg.batch, rng)):
             batch = collate([_word_dropout(encoded[i], rng) for i in idx])
             if cfg.decoder == "path":
                 loss = path_loss(net, batch, [golds[i] for i in idx], n_names)

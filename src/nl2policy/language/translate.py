@@ -182,6 +182,12 @@ def check_topic(domain: str, text: str, lexicon: dict[str, set[str]]) -> tuple[f
     return 1.0, []
 
 
+def tree_probability(node_probs: dict[int, float]) -> float:
+    """The decoder's probability of the whole tree (the product over its nodes): the confidence
+    of an on-topic translation, before the topic check scales it."""
+    return math.prod(node_probs.values())
+
+
 def translate(domain: str, text: str, name: str = DEFAULT_MODEL) -> Translation:
     """Translate one description into a valid tree of `domain`, with confidence and warnings."""
     get_domain(domain)
@@ -189,7 +195,7 @@ def translate(domain: str, text: str, name: str = DEFAULT_MODEL) -> Translation:
         raise EmptyDescription("the description is empty: write what the policy should do")
     loaded = get_model(domain, name)
     tree, node_probs = loaded.translator.predict([text])[0]
-    seq_prob = math.prod(node_probs.values())
+    seq_prob = tree_probability(node_probs)
     factor, warnings = check_topic(domain, text, loaded.lexicon)
     confidence = max(0.0, min(1.0, seq_prob * factor))
     if confidence < LOW_CONFIDENCE:
