@@ -54,17 +54,21 @@ def main() -> None:
         translator.encode(spec.description)  # the MiniLM features alone, for the split below
         features.append(1000 * (time.perf_counter() - t0))
     latencies.sort()
-    # side by side: the ensemble's decoder run as one stacked batch vs member by member (MiniLM cached)
-    stacked_ms, looped_ms = [], []
+    # side by side (MiniLM cached, rounds interleaved): the ensemble's decoder as one stacked batch
+    # vs member by member, and the config's beam vs greedy decoding
+    variants = {"stacked": (True, None), "member by member": (False, None), "stacked, greedy": (True, 1)}
+    network_ms: dict[str, list[float]] = {v: [] for v in variants}
     for spec in specs:
-        translator.encode(spec.description)  # MiniLM features cached for both timings
+        translator.encode(spec.description)  # MiniLM features cached for every timing
     for i, spec in enumerate(specs):
-        for flag, sink in ((True, stacked_ms), (False, looped_ms))[:: 1 if i % 2 else -1]:
-            translator.stack_members = flag
+        order = list(variants)[i % len(variants):] + list(variants)[:i % len(variants)]
+        for variant in order:
+            translator.stack_members, translator.beam = variants[variant]
             t0 = time.perf_counter()
             translator.predict([spec.description])
-            sink.append(1000 * (time.perf_counter() - t0))
-    translator.stack_members = True
+            network_ms[variant].append(1000 * (time.perf_counter() - t0))
+    translator.stack_members, translator.beam = True, None
+    net = {v: statistics.median(ms) for v, ms in network_ms.items()}
     median = statistics.median(latencies)
     p90 = latencies[int(0.9 * len(latencies))]
     lines = [f"command: .venv/bin/python benchmarks/translator_speed.py --domain {args.domain} --threads {args.threads} "
@@ -77,9 +81,10 @@ def main() -> None:
              f"model loaded, each text new to the MiniLM cache: median {median:.1f} ms, p90 {p90:.1f} ms, "
              f"max {latencies[-1]:.1f} ms (budget 20 ms) -> {'OK' if median < 20 else 'OVER'}",
              f"of which MiniLM features (tokenize, run, align to words): median {statistics.median(features):.1f} ms",
-             f"network part ({len(translator.nets)} members, MiniLM cached), rounds interleaved: stacked decoder median "
-             f"{statistics.median(stacked_ms):.2f} ms vs member by member {statistics.median(looped_ms):.2f} ms "
-             f"-> {statistics.median(looped_ms) / statistics.median(stacked_ms):.2f}x"]
+             f"network part ({len(translator.nets)} members, beam {translator.cfg.beam}, MiniLM cached), rounds "
+             f"interleaved: stacked decoder median {net['stacked']:.2f} ms vs member by member "
+             f"{net['member by member']:.2f} ms -> {net['member by member'] / net['stacked']:.2f}x; "
+             f"greedy (stacked) {net['stacked, greedy']:.2f} ms: the beam costs {net['stacked'] / net['stacked, greedy']:.2f}x"]
     print("\n".join(lines))
     if args.out:
         with open(args.out, "w") as fh:

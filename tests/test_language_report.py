@@ -80,3 +80,28 @@ def test_fold_result_counts_confident_and_unsure_translations(monkeypatch, one_t
     assert 0 <= r["confident"] <= r["n"] == 10
     assert r["confident_right"] + r["unsure_right"] == round(r["tree_acc"] * 10)
     assert r["confident_right"] <= r["confident"]
+
+
+def test_summary_sets_beam_and_greedy_accuracy_of_the_same_folds_side_by_side(tmp_path):
+    a = dict(_run("taxi", "m", "cv-r0-f0", "cv", 0.75), greedy_tree_acc=0.5)
+    b = dict(_run("taxi", "m", "cv-r0-f1", "cv", 0.5), greedy_tree_acc=0.75)
+    c = dict(_run("taxi", "m", "cv-r0-f2", "cv", 0.5), greedy_tree_acc=0.25)
+    plain = _run("taxi", "g", "cv-r0-f0", "cv", 0.5)  # decoded greedily only: not in the beam table
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in (a, b, c, plain)))
+    md = summarize(tmp_path, "cmd", "budget").read_text()
+    assert "| taxi | m | cv | 3 | 58.33 | 50.00 | 2 / 1 |" in md
+    assert "| taxi | g |" not in md.split("## Beam search")[1]
+
+
+def test_fold_result_with_a_beam_also_records_greedy_decoding(monkeypatch, one_torch_thread):
+    import dataclasses
+
+    from nl2policy.language import evaluate
+    from nl2policy.language.corpus import load_corpus
+    from nl2policy.language.models.config import MODELS
+    from nl2policy.language.models.pretrained import MiniLMCache
+
+    monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=2, beam=3))
+    specs = load_corpus("taxi")[:40]
+    r = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
+    assert 0 <= r["greedy_tree_acc"] <= 1 and 0 <= r["tree_acc"] <= 1

@@ -24,6 +24,12 @@ def test_default_model_is_shipped(domain):
     path = tr.SHIPPED_DIR / f"{domain}-{DEFAULT_MODEL}.pt"
     assert path.is_file(), f"run the command in {tr.SHIPPED_DIR / 'README.md'}"
     assert path.stat().st_size < 6_000_000
+    import torch
+
+    from nl2policy.language.models.config import MODELS
+
+    saved = torch.load(path, weights_only=False)["cfg"]
+    assert saved == MODELS[DEFAULT_MODEL].to_dict(), "the shipped model is stale: retrain it (see its README)"
 
 
 @pytest.mark.parametrize("domain", DOMAINS)

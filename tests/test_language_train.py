@@ -6,9 +6,10 @@ import dataclasses
 import pytest
 import torch
 
-from nl2policy.language import evaluate
 from nl2policy.language.augment import augment_fold, augment_text
 from nl2policy.language.corpus import kfold, load_corpus
+from nl2policy.language import dataset
+from nl2policy.language.dataset import training_pairs
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
 from nl2policy.language.train import fit
 from nl2policy.trees import to_tokens
@@ -18,14 +19,14 @@ def test_fold_training_data_reads_only_training_indices(monkeypatch):
     specs = load_corpus("taxi")
     train, test = next(kfold(specs, 5, seed=0))
     touched = []
-    real_augment = evaluate.augment_fold
+    real_augment = dataset.augment_fold
 
     def spy(specs_, idx, copies, seed=0):
         touched.extend(idx)
         return real_augment(specs_, idx, copies, seed)
 
-    monkeypatch.setattr(evaluate, "augment_fold", spy)
-    pairs = evaluate.fold_training_pairs("taxi", specs, train, DEFAULT_MODEL)
+    monkeypatch.setattr(dataset, "augment_fold", spy)
+    pairs = training_pairs("taxi", specs, train, MODELS[DEFAULT_MODEL])
     assert touched and set(touched) <= set(train)
     test_texts = {specs[i].description for i in test}
     test_copies = {augment_text(specs[i].description, specs[i].id, c) for i in test for c in range(3)}
@@ -171,10 +172,12 @@ def test_stacked_decoder_step_equals_each_members_own_step(name, one_torch_threa
                 assert torch.allclose(g[e], w, atol=1e-5)
 
 
-def test_stacked_and_member_by_member_decoding_give_the_same_translations(one_torch_thread):
+@pytest.mark.parametrize("beam", [1, 3])
+def test_stacked_and_member_by_member_decoding_give_the_same_translations(beam, one_torch_thread):
     specs = load_corpus("highway")
     cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, ensemble=3)
     model = fit("highway", "ens", cfg, [(s.description, s.tree) for s in specs[:48]], seed=0)
+    model.beam = beam
     texts = [s.description for s in specs[48:80]]
     stacked = model.predict(texts)
     model.stack_members = False
@@ -182,3 +185,52 @@ def test_stacked_and_member_by_member_decoding_give_the_same_translations(one_to
     assert [t for t, _ in stacked] == [t for t, _ in looped]
     for (_, a), (_, b) in zip(stacked, looped):
         assert a.keys() == b.keys() and all(abs(a[k] - b[k]) < 1e-5 for k in a)
+
+
+def test_beam_search_reports_the_networks_own_probabilities_and_mostly_beats_greedy(one_torch_thread):
+    """The beam's hypotheses are reordered every step; if a state were carried to the wrong
+    hypothesis, the node probabilities it reports would not be the network's probabilities of
+    that tree, which teacher forcing computes independently."""
+    import math
+
+    from nl2policy.language.train import _targets, collate, gold_steps
+
+    specs = load_corpus("highway")
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16)
+    model = fit("highway", "one", cfg, [(s.description, s.tree) for s in specs[:48]], seed=0)
+    texts = [s.description for s in specs[48:72]]
+    greedy = model.predict(texts)
+    model.beam = 4
+    beamed = model.predict(texts)
+    gains = []
+    for text, (tree, probs), (_, greedy_probs) in zip(texts, beamed, greedy):
+        logp = sum(math.log(p) for p in probs.values())
+        steps = gold_steps(tree, "highway", model.tree_tokens)
+        with torch.inference_mode():
+            nll = model.net.loss(collate([model.encode(text)]), *_targets([steps], len(model.tree_tokens)))
+        assert -float(nll) * len(steps[0]) == pytest.approx(logp, abs=1e-4)
+        gains.append(logp - sum(math.log(p) for p in greedy_probs.values()))
+    # beam search may end below greedy on a text (greedy's path can be pruned), but not usually
+    assert sum(gains) > 0 and sum(g > -1e-6 for g in gains) >= 0.75 * len(gains)
+
+
+def test_members_can_train_on_their_own_draws_of_pairs(one_torch_thread):
+    """With a function of the member index, each member reads its own pairs (and is still
+    reproducible); the word vocabulary comes from the real texts only."""
+    from nl2policy.language.dataset import member_pairs
+
+    specs = load_corpus("taxi")[:30]
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=1, ensemble=2, synthetic=20, member_draws=True)
+    draws = member_pairs("taxi", specs, range(30), cfg, seed=0)
+    first, second = draws(0), draws(1)
+    assert first[:30] == second[:30]  # the real descriptions are shared
+    assert {t for t, _ in first[30:]}.isdisjoint({t for t, _ in second[30:]})  # augmented and synthetic differ
+    asked = []
+    model = fit("taxi", "d", cfg, lambda m: asked.append(m) or draws(m), seed=0,
+                vocab_texts=[s.description for s in specs])
+    assert asked == [0, 1] and len(model.nets) == 2
+    again = fit("taxi", "d", cfg, draws, seed=0, vocab_texts=[s.description for s in specs])
+    for n1, n2 in zip(model.nets, again.nets):
+        for p1, p2 in zip(n1.parameters(), n2.parameters()):
+            assert torch.equal(p1, p2)
+    assert member_pairs("taxi", specs, range(30), dataclasses.replace(cfg, member_draws=False)) == first

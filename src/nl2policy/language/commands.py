@@ -130,7 +130,8 @@ def translation_experiment(
     command = "nl2policy translation-experiment " + " ".join(f"--domain {d}" for d in domain) + f" --plan '{plan}' --out {out}"
     if not summarize_only:
         run_experiment(steps, out, progress=lambda msg: err.print(f"fold: {msg}", highlight=False))
-    md = summarize(out, command, "one CPU thread; model seed = CV repeat index; augmentation/synthetic seed 0; "
-                                 "epochs and data per model in nl2policy/language/models/config.py",
+    md = summarize(out, command, "one CPU thread; model seed = CV repeat index (ensemble member m: + m); "
+                                 "augmentation/synthetic seed 0 (with member_draws, member m: seed m); "
+                                 "epochs, data and beam per model in nl2policy/language/models/config.py",
                    planned=[(d, name, protocol, 5 * repeats if protocol == "cv" else 4) for d, name, protocol, repeats in steps])
     console.print(md.read_text())

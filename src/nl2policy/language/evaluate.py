@@ -17,28 +17,16 @@ from typing import Callable, Optional, Sequence
 import torch
 
 from nl2policy.domains import get_domain
-from nl2policy.language.augment import augment_fold
 from nl2policy.language.corpus import Spec, kfold, load_corpus
+from nl2policy.language.dataset import member_pairs
 from nl2policy.language.models.config import MODELS
 from nl2policy.language.models.pretrained import MiniLMCache
-from nl2policy.language.synthetic import synthetic_pairs
 from nl2policy.language.train import fit
 from nl2policy.language.translate import LOW_CONFIDENCE, tree_probability
 from nl2policy.trees import GRID_SLOTS, Tree, TreeError, to_grid
 from nl2policy.trees.parse import validate
 
 PAPER_HAN2TREE = {"taxi": 86.30, "highway": 80.38}
-
-
-def fold_training_pairs(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], name: str, seed: int = 0) -> list:
-    """Training pairs of one fold: its real descriptions, their augmented copies and the
-    synthetic pairs. Only `train_idx` is ever read."""
-    cfg = MODELS[name]
-    pairs = [(specs[i].description, specs[i].tree) for i in train_idx]
-    pairs += augment_fold(specs, train_idx, cfg.aug_copies, seed)
-    if cfg.synthetic:
-        pairs += synthetic_pairs(domain, cfg.synthetic, seed, [specs[i].tree for i in train_idx], cfg.synth_per_tree)
-    return pairs
 
 
 def slot_accuracy(pred: Tree, gold: Tree) -> float:
@@ -67,7 +55,7 @@ def score(domain: str, preds: Sequence[Tree], golds: Sequence[Tree]) -> dict:
 def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_idx: Sequence[int], name: str,
              seed: int, cache: MiniLMCache) -> dict:
     start = time.time()
-    pairs = fold_training_pairs(domain, specs, train_idx, name)
+    pairs = member_pairs(domain, specs, train_idx, MODELS[name])
     model = fit(domain, name, MODELS[name], pairs, seed, cache=cache,
                 vocab_texts=[specs[i].description for i in train_idx])
     decoded = model.predict([specs[i].description for i in test_idx])
@@ -80,7 +68,11 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     right = [p == g for p, g in zip(preds, golds)]
     result.update(confident=sum(sure), confident_right=sum(s and r for s, r in zip(sure, right)),
                   unsure_right=sum(r and not s for s, r in zip(sure, right)))
-    result.update(train_pairs=len(pairs), seconds=round(time.time() - start, 1))
+    if model.cfg.beam > 1:  # the same networks decoded greedily, side by side
+        model.beam = 1
+        greedy = [t for t, _ in model.predict([specs[i].description for i in test_idx])]
+        result.update(greedy_tree_acc=sum(p == g for p, g in zip(greedy, golds)) / len(golds))
+    result.update(train_pairs=len(pairs(0) if callable(pairs) else pairs), seconds=round(time.time() - start, 1))
     return result
 
 
@@ -162,6 +154,7 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
                      f"{cell('token_acc')} | {cell('policy_acc')} | {'yes' if r['all_valid'] else 'NO'} | "
                      f"{r['train_pairs']} | {r['seconds_per_fold']} |")
     lines += _writer_breakdown(runs)
+    lines += _beam_effect(runs)
     lines += _calibration(runs)
     missing = [f"{d} {m} {p}: {want - len(table.get((d, m, p), []))} of {want} folds"
                for d, m, p, want in planned if len(table.get((d, m, p), [])) < want]
@@ -172,6 +165,25 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
     md.write_text("\n".join(lines) + "\n")
     _figure(rows, out / "translation.png")
     return md
+
+
+def _beam_effect(runs: list[dict]) -> list[str]:
+    """Models decoded with a beam also record greedy decoding of the same networks on the same
+    folds: the beam's own effect, side by side."""
+    rows: dict[tuple, list[dict]] = {}
+    for r in runs:
+        if "greedy_tree_acc" in r:
+            rows.setdefault((r["domain"], r["model"], r["protocol"]), []).append(r)
+    if not rows:
+        return []
+    lines = ["", "## Beam search against greedy decoding (same networks, same folds)", "",
+             "| domain | model | protocol | folds | tree acc, beam | tree acc, greedy | folds better / worse |",
+             "|---|---|---|---:|---:|---:|---|"]
+    for (domain, model, protocol), rs in sorted(rows.items()):
+        beam, greedy = [100 * r["tree_acc"] for r in rs], [100 * r["greedy_tree_acc"] for r in rs]
+        better, worse = sum(b > g for b, g in zip(beam, greedy)), sum(b < g for b, g in zip(beam, greedy))
+        lines.append(f"| {domain} | {model} | {protocol} | {len(rs)} | {mean(beam):.2f} | {mean(greedy):.2f} | {better} / {worse} |")
+    return lines
 
 
 def held_out_writers(domain: str) -> dict[str, str]:

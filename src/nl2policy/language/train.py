@@ -1,9 +1,9 @@
 """Turning (description, tree) pairs into tensors, the training loop, and constrained decoding.
 
 `fit` is the whole training loop in plain view (Adam, teacher forcing, a few epochs), run
-once per member of a small ensemble; `TrainedTranslator.predict` decodes greedily under the
-grammar mask with the members' probabilities averaged, so every output is a valid tree, and
-returns each node's probability for the confidence score.
+once per member of a small ensemble; `TrainedTranslator.predict` runs a beam search (greedy
+with a beam of one) under the grammar mask with the members' probabilities averaged, so every
+output is a valid tree, and returns each node's probability for the confidence score.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import random
 from dataclasses import dataclass, field
-from typing import Callable, Optional, Sequence
+from typing import Callable, Optional, Sequence, Union
 
 import numpy as np
 import torch
@@ -27,6 +27,8 @@ from nl2policy.trees import Tree, from_tokens, to_tokens
 
 MAX_STEPS = 15
 MAX_SENT_WORDS = 60
+Pairs = Union[Sequence[tuple[str, Tree]], Callable[[int], Sequence[tuple[str, Tree]]]]
+"""Training pairs: one list for every ensemble member, or member index -> that member's list."""
 
 
 @dataclass
@@ -47,6 +49,7 @@ class TrainedTranslator:
     nets: list[Translator]  # an ensemble: decoding averages their step probabilities
     cache: MiniLMCache = field(default_factory=MiniLMCache, repr=False)
     history: list[float] = field(default_factory=list, repr=False)  # mean training loss per epoch
+    beam: Optional[int] = None  # hypotheses kept while decoding (1 = greedy); None: the config's
     stack_members: bool = True  # flat encoders: decode all members as one batch (False: one by one, same result)
 
     @property
@@ -74,7 +77,7 @@ class TrainedTranslator:
 
     @torch.inference_mode()
     def predict(self, texts: Sequence[str], batch_size: int = 64) -> list[tuple[Tree, dict[int, float]]]:
-        """Greedy grammar-constrained decoding. Returns (tree, {grid slot: probability})."""
+        """Grammar-constrained decoding (beam search, greedy when `beam` is 1). Returns (tree, {grid slot: probability})."""
         for net in self.nets:
             net.eval()
         out = []
@@ -90,71 +93,102 @@ class TrainedTranslator:
         return [(tree, dict(zip(_preorder_slots(tree), probs))) for tree, probs in decoded]
 
     def _decode(self, items: list[Encoded]) -> list[tuple[Tree, dict[int, float]]]:
+        """Beam search under the grammar mask over the members' averaged step probabilities
+        (`self.beam` hypotheses per description; 1 is greedy). A tree's score is the sum of its
+        nodes' log-probabilities, so a subtree the text does not support costs its every node."""
         vocab = get_domain(self.domain).vocab
         names = self.tree_tokens
         index = {t: i for i, t in enumerate(names)}
-        B = len(items)
-        prefixes: list[list[str]] = [[] for _ in range(B)]
-        probs: list[dict[int, float]] = [{} for _ in range(B)]
-        step = self._stepper(collate(items), B)
-        for t in range(MAX_STEPS):
+        B, K = len(items), max(1, self.beam or self.cfg.beam)
+        state = DecoderState(self, collate(items), copies=K)
+        prefixes: list[list[str]] = [[] for _ in range(B * K)]
+        probs: list[dict[int, float]] = [{} for _ in range(B * K)]
+        score = torch.full((B, K), -math.inf)
+        score[:, 0] = 0.0  # the copies start identical: only the first may expand
+        for _ in range(MAX_STEPS):
             slots = [next_slot(p, vocab) for p in prefixes]
             if all(s is None for s in slots):
                 break
-            mask = torch.zeros(B, len(names), dtype=torch.bool)
-            parent = torch.full((B,), -1, dtype=torch.long)
-            branch = torch.zeros(B, dtype=torch.long)
-            for b, s in enumerate(slots):
+            mask = torch.zeros(B * K, len(names), dtype=torch.bool)
+            parent = torch.full((B * K,), -1, dtype=torch.long)
+            branch = torch.zeros(B * K, dtype=torch.long)
+            for r, s in enumerate(slots):
                 if s is None:
-                    mask[b, 0] = True  # finished: any token, ignored
+                    mask[r, 0] = True  # finished: one placeholder continuation at no cost
                     continue
-                mask[b, [index[a] for a in allowed_tokens(s, vocab)]] = True
-                parent[b], branch[b] = s.parent, s.branch
-            logits = step(parent, branch)  # (members, B, tokens)
+                mask[r, [index[a] for a in allowed_tokens(s, vocab)]] = True
+                parent[r], branch[r] = s.parent, s.branch
+            logits = state.step(parent, branch)  # (members, B*K, tokens)
             p = torch.softmax(logits.masked_fill(~mask, -1e9), -1).mean(0)
-            choice = p.argmax(-1)
-            for b, s in enumerate(slots):
-                if s is not None:
-                    prefixes[b].append(names[choice[b]])
-                    probs[b][s.grid] = float(p[b, choice[b]])
-            step.tokens.append(choice)
-        return [(from_tokens(pre, vocab), pr) for pre, pr in zip(prefixes, probs)]
+            done = torch.tensor([s is None for s in slots])
+            logp = torch.where(mask, p.clamp(min=1e-12).log(), torch.tensor(-math.inf))
+            logp[done] = torch.where(mask[done], 0.0, -math.inf)
+            total = (score.view(B * K, 1) + logp).view(B, K * len(names))
+            best, flat = total.topk(K, -1)  # ties keep the lower index: greedy's argmax when K = 1
+            source = (torch.arange(B)[:, None] * K + flat // len(names)).view(-1)
+            choice = (flat % len(names)).view(-1)
+            score = best
+            prefixes = [list(prefixes[r]) for r in source.tolist()]
+            probs = [dict(probs[r]) for r in source.tolist()]
+            for r, (src, c) in enumerate(zip(source.tolist(), choice.tolist())):
+                if slots[src] is not None:
+                    prefixes[r].append(names[c])
+                    probs[r][slots[src].grid] = float(p[src, c])
+            state.reorder(source)
+            state.push(choice)
+        top = score.argmax(-1)  # beams stay sorted, but finished ones may have been overtaken
+        return [(from_tokens(prefixes[b * K + int(k)], vocab), probs[b * K + int(k)]) for b, k in enumerate(top)]
 
-    def _stepper(self, batch: Batch, B: int) -> Callable:
-        """step(parent, branch) -> every member's logits (E, B, V) for the next slot; it reads
-        the tokens chosen so far from step.tokens (tokens[0] = start) and keeps the states.
-        Flat encoders run all members at once (StackedDecoder); the hierarchical one (or any, with
-        stack_members off), member by member."""
-        memories = [net.encode(batch) for net in self.nets]
-        rows = torch.arange(B)
-        tokens = [torch.full((B,), self.net.start_id, dtype=torch.long)]
-        ctx0 = torch.zeros(B, self.net.out.in_features - self.cfg.hidden)
-        if self.cfg.encoder == "flat" and self.stack_members:
-            stacked = StackedDecoder(self.nets)
-            words, mask = torch.stack([m["words"] for m in memories]), memories[0]["mask"]
-            hs, ctxs = [torch.stack([m["h0"] for m in memories])], [ctx0.expand(len(self.nets), -1, -1)]
 
-            def step(parent: torch.Tensor, branch: torch.Tensor) -> torch.Tensor:
-                src = parent + 1  # the root's parent is the start state
-                h_parent = torch.stack(hs, 2)[:, rows, src]
-                h, ctx, logits = stacked.step(words, mask, hs[-1], ctxs[-1], tokens[-1], h_parent,
-                                              torch.stack(tokens, 1)[rows, src], branch)
-                hs.append(h)
-                ctxs.append(ctx)
-                return logits
+class DecoderState:
+    """Every member's running decoder over a batch of hypotheses: the state after each step
+    (a node's children are fed its state), the tokens chosen, the last attention context.
+
+    Kept as tensors with a step axis, so the beam search reorders hypotheses with one index per
+    tensor. Flat encoders run all members at once (StackedDecoder); the hierarchical one (or
+    any, with `stack_members` off), member by member: same arithmetic."""
+
+    def __init__(self, model: TrainedTranslator, batch: Batch, copies: int = 1) -> None:
+        """`copies` hypotheses per description (rows b*copies ... b*copies+copies-1): each
+        description is encoded once, then its memory repeated."""
+        self.nets = model.nets
+        self.memories = [{k: v.repeat_interleave(copies, 0) for k, v in net.encode(batch).items()} for net in self.nets]
+        h0 = torch.stack([m["h0"] for m in self.memories])  # (E, B, h)
+        E, B, h = h0.shape
+        self.states = h0.new_zeros(E, B, MAX_STEPS + 1, h)
+        self.states[:, :, 0] = h0
+        self.tokens = torch.full((B, MAX_STEPS + 1), self.nets[0].start_id, dtype=torch.long)
+        self.ctx = h0.new_zeros(E, B, self.nets[0].out.in_features - h)
+        self.t = 0
+        self.stacked = None
+        if model.cfg.encoder == "flat" and model.stack_members:
+            self.stacked = StackedDecoder(self.nets)
+            self.words = torch.stack([m["words"] for m in self.memories])
+
+    def step(self, parent: torch.Tensor, branch: torch.Tensor) -> torch.Tensor:
+        """Every member's logits (E, B, V) for the next slot, whose parent is at token position
+        `parent` (-1: the root, fed the start state)."""
+        rows, src = torch.arange(len(parent)), parent + 1
+        h_prev, prev_tok = self.states[:, :, self.t], self.tokens[:, self.t]
+        h_parent, parent_tok = self.states[:, rows, src], self.tokens[rows, src]
+        if self.stacked is not None:
+            h, ctx, logits = self.stacked.step(self.words, self.memories[0]["mask"], h_prev, self.ctx, prev_tok,
+                                               h_parent, parent_tok, branch)
         else:
-            runs = [(m, [m["h0"]], [ctx0]) for m in memories]
+            out = [net.step(m, h_prev[e], self.ctx[e], prev_tok, h_parent[e], parent_tok, branch)
+                   for e, (net, m) in enumerate(zip(self.nets, self.memories))]
+            h, ctx, logits = (torch.stack(x) for x in zip(*out))
+        self.states[:, :, self.t + 1] = h
+        self.ctx = ctx
+        return logits
 
-            def step(parent: torch.Tensor, branch: torch.Tensor) -> torch.Tensor:
-                out = []
-                for net, (memory, hs, ctxs) in zip(self.nets, runs):
-                    h, ctx, logits = net.run_step(memory, hs, ctxs, tokens, parent, branch)
-                    hs.append(h)
-                    ctxs.append(ctx)
-                    out.append(logits)
-                return torch.stack(out)
-        step.tokens = tokens
-        return step
+    def reorder(self, source: torch.Tensor) -> None:
+        """Hypothesis i continues hypothesis source[i] (of the same description)."""
+        self.states, self.tokens, self.ctx = self.states[:, source], self.tokens[source], self.ctx[:, source]
+
+    def push(self, chosen: torch.Tensor) -> None:
+        self.t += 1
+        self.tokens[:, self.t] = chosen
 
 
 def _preorder_slots(tree: Tree, slot: int = 0) -> list[int]:
@@ -230,23 +264,34 @@ def _targets(golds: list, n_names: int) -> tuple[torch.Tensor, ...]:
     return targets, parents, branches, masks, steps
 
 
-def fit(domain: str, name: str, cfg: ModelConfig, pairs: Sequence[tuple[str, Tree]], seed: int = 0,
+def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
         cache: Optional[MiniLMCache] = None, progress: Optional[Callable[[int, int], None]] = None,
         vocab_texts: Optional[Sequence[str]] = None, state: Optional[dict] = None,
         on_epoch: Optional[Callable[[dict], None]] = None) -> TrainedTranslator:
     """Train a translator on (description, tree) pairs: `cfg.ensemble` networks, one after the
-    other, with seeds seed, seed+1, ... The word vocabulary comes from `vocab_texts` (the real
-    training descriptions) or the pairs. After every epoch `on_epoch` gets a checkpoint dict;
-    passing one back as `state` resumes there."""
-    words = WordVocab.build(vocab_texts if vocab_texts is not None else [t for t, _ in pairs])
+    other, with seeds seed, seed+1, ... `pairs` is one list for every member, or a function of
+    the member index that gives each member its own draw (of augmented and synthetic pairs).
+    The word vocabulary comes from `vocab_texts` (the real training descriptions) or the first
+    member's pairs. After every epoch `on_epoch` gets a checkpoint dict; passing one back as
+    `state` resumes there."""
+    draw = pairs if callable(pairs) else (lambda member: pairs)
+    words = WordVocab.build(vocab_texts if vocab_texts is not None else [t for t, _ in draw(0)])
     vocab = get_domain(domain).vocab
     names = vocab.question_ids + vocab.action_ids
     model = TrainedTranslator(domain, name, cfg, words, [], cache or MiniLMCache())
-    encoded = [model.encode(t) for t, _ in pairs]
-    if cfg.decoder == "path":
-        golds = [tree_nodes(tree, names, vocab.question_ids) for _, tree in pairs]
-    else:
-        golds = [gold_steps(tree, domain, names) for _, tree in pairs]
+
+    last: list = []  # (pairs, encoded, golds) of the last draw: members sharing one list encode it once
+
+    def prepare(member_pairs: Sequence[tuple[str, Tree]]) -> tuple[list[Encoded], list]:
+        if not last or last[0] is not member_pairs:
+            encoded = [model.encode(t) for t, _ in member_pairs]
+            if cfg.decoder == "path":
+                golds = [tree_nodes(tree, names, vocab.question_ids) for _, tree in member_pairs]
+            else:
+                golds = [gold_steps(tree, domain, names) for _, tree in member_pairs]
+            last[:] = [member_pairs, encoded, golds]
+        return last[1], last[2]
+
     finished = list(state["finished"]) if state else []
     for member in range(cfg.ensemble):
         torch.manual_seed(seed + member)  # the initial weights: a member is reproducible from its seed
@@ -261,6 +306,7 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Sequence[tuple[str, Tre
                     on_epoch({"member": member, "finished": list(finished), "epoch": epoch, "net": net.state_dict(),
                               "opt": opt.state_dict(), "rng": rng.getstate(), "torch_rng": torch.get_rng_state()})
 
+            encoded, golds = prepare(draw(member))
             _fit_member(model, net, encoded, golds, len(names), seed + member, resume, checkpoint,
                         None if progress is None else lambda done, total, m=member: progress(m * total + done, cfg.ensemble * total))
             finished.append(net.state_dict())

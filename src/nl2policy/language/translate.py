@@ -69,20 +69,6 @@ def find_model(domain: str, name: str = DEFAULT_MODEL) -> Optional[Path]:
     return None
 
 
-def training_pairs(domain: str, cfg: ModelConfig, seed: int = 0) -> tuple[list, list[str]]:
-    """The whole shared corpus, its augmented copies and the synthetic pairs; plus the texts
-    the word vocabulary is built from (the real descriptions)."""
-    from nl2policy.language.augment import augment_fold
-    from nl2policy.language.synthetic import synthetic_pairs
-
-    specs = load_corpus(domain)
-    idx = list(range(len(specs)))
-    pairs = [(s.description, s.tree) for s in specs] + augment_fold(specs, idx, cfg.aug_copies, seed)
-    if cfg.synthetic:
-        pairs += synthetic_pairs(domain, cfg.synthetic, seed, [s.tree for s in specs], cfg.synth_per_tree)
-    return pairs, [s.description for s in specs]
-
-
 def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
                   progress: Optional[Callable[[int, int], None]] = None, out: Optional[Path] = None) -> Path:
     """Train on the whole shared corpus and save into `out` (default: the user's model folder);
@@ -96,7 +82,11 @@ def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
     ckpt = path.with_suffix(".ckpt")
     path.parent.mkdir(parents=True, exist_ok=True)
     state = torch.load(ckpt, weights_only=False) if ckpt.is_file() else None
-    pairs, vocab_texts = training_pairs(domain, cfg, seed)
+    from nl2policy.language.dataset import member_pairs
+
+    specs = load_corpus(domain)
+    pairs = member_pairs(domain, specs, range(len(specs)), cfg, seed)
+    vocab_texts = [s.description for s in specs]  # the word vocabulary: real descriptions only
 
     def save_checkpoint(checkpoint: dict) -> None:
         tmp = ckpt.with_suffix(".tmp")

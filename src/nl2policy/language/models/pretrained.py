@@ -24,6 +24,7 @@ mix. Each layer costs ~5 ms per description on one core and the budget is 20 ms;
 config may ask for more (`ModelConfig.minilm_layers`)."""
 DIM = 384
 MAX_PIECES = 256
+"""The window MiniLM reads at once (its position embeddings allow 512; 256 bounds the latency)."""
 
 
 @lru_cache(maxsize=2)
@@ -70,9 +71,16 @@ class MiniLMCache:
 @torch.inference_mode()
 def encode_tokens(text: str, tokens: Sequence[Token], layers: int = LAYERS) -> np.ndarray:
     tokenizer, model = _load(layers)
-    enc = tokenizer(text, return_tensors="pt", return_offsets_mapping=True, truncation=True, max_length=MAX_PIECES)
-    offsets = enc.pop("offset_mapping")[0].tolist()
-    states = torch.stack(model(**enc, output_hidden_states=True).hidden_states)[:, 0]  # (L+1, pieces, 384)
+    enc = tokenizer(text, add_special_tokens=False, return_offsets_mapping=True)
+    pieces, offsets = enc["input_ids"], enc["offset_mapping"]
+    # a text longer than the model's window is read in consecutive windows (each with its own
+    # [CLS] ... [SEP]), so the end of a long explanation, often its summary, is not cut off
+    width, states = MAX_PIECES - 2, []
+    for start in range(0, max(1, len(pieces)), width):
+        ids = torch.tensor([[tokenizer.cls_token_id, *pieces[start:start + width], tokenizer.sep_token_id]])
+        out = model(input_ids=ids, attention_mask=torch.ones_like(ids), output_hidden_states=True).hidden_states
+        states.append(torch.stack(out)[:, 0, 1:-1])  # (L+1, pieces, 384) without [CLS] and [SEP]
+    states = torch.cat(states, 1)
     # each word piece goes to the token whose span holds its first character (vectorised: a
     # per-token search costs more than the transformer itself)
     token_starts = np.array([t.start for t in tokens] or [0])
