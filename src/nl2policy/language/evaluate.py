@@ -58,7 +58,8 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     pairs = member_pairs(domain, specs, train_idx, MODELS[name])
     model = fit(domain, name, MODELS[name], pairs, seed, cache=cache,
                 vocab_texts=[specs[i].description for i in train_idx])
-    decoded = model.predict([specs[i].description for i in test_idx])
+    texts = [specs[i].description for i in test_idx]
+    decoded = model.predict(texts)
     preds = [t for t, _ in decoded]
     golds = [specs[i].tree for i in test_idx]
     result = score(domain, preds, golds)
@@ -70,8 +71,8 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
                   unsure_right=sum(r and not s for s, r in zip(sure, right)))
     if model.cfg.beam > 1:  # the same networks decoded greedily, side by side
         model.beam = 1
-        greedy = [t for t, _ in model.predict([specs[i].description for i in test_idx])]
-        result.update(greedy_tree_acc=sum(p == g for p, g in zip(greedy, golds)) / len(golds))
+        greedy = [t for t, _ in model.predict(texts)]
+        result.update(greedy_tree_acc=score(domain, greedy, golds)["tree_acc"])
     result.update(train_pairs=len(pairs(0) if callable(pairs) else pairs), seconds=round(time.time() - start, 1))
     return result
 
@@ -118,6 +119,14 @@ def _one_per_fold(runs: list[dict]) -> list[dict]:
     return list(first.values())
 
 
+def _by_row(runs: list[dict]) -> dict[tuple[str, str, str], list[dict]]:
+    """Folds grouped by table row: (domain, model, protocol)."""
+    rows: dict[tuple[str, str, str], list[dict]] = {}
+    for r in runs:
+        rows.setdefault((r["domain"], r["model"], r["protocol"]), []).append(r)
+    return rows
+
+
 def _read(path: Path) -> list[dict]:
     return [json.loads(l) for l in path.read_text().splitlines() if l.strip()] if path.is_file() else []
 
@@ -127,9 +136,7 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
     from nl2policy.report import provenance
 
     runs = _one_per_fold(_read(out / "runs.jsonl"))
-    table: dict = {}
-    for r in runs:
-        table.setdefault((r["domain"], r["model"], r["protocol"]), []).append(r)
+    table = _by_row(runs)
     rows = []
     for (domain, model, protocol), rs in sorted(table.items()):
         row = {"domain": domain, "model": model, "protocol": protocol, "folds": len(rs),
@@ -170,10 +177,7 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
 def _beam_effect(runs: list[dict]) -> list[str]:
     """Models decoded with a beam also record greedy decoding of the same networks on the same
     folds: the beam's own effect, side by side."""
-    rows: dict[tuple, list[dict]] = {}
-    for r in runs:
-        if "greedy_tree_acc" in r:
-            rows.setdefault((r["domain"], r["model"], r["protocol"]), []).append(r)
+    rows = _by_row([r for r in runs if "greedy_tree_acc" in r])
     if not rows:
         return []
     lines = ["", "## Beam search against greedy decoding (same networks, same folds)", "",
@@ -219,11 +223,8 @@ def _calibration(runs: list[dict]) -> list[str]:
     lines = ["", f"Confidence (test descriptions pooled over folds; confident = node-probability product >= {LOW_CONFIDENCE}):", "",
              "| domain | model | protocol | confident share | tree acc when confident | tree acc when unsure |",
              "|---|---|---|---:|---:|---:|"]
-    groups: dict = {}
-    for r in runs:
-        groups.setdefault((r["domain"], r["model"], r["protocol"]), []).append(r)
     pct = lambda a, b: f"{100 * a / b:.1f}" if b else "-"
-    for (domain, model, protocol), rs in sorted(groups.items()):
+    for (domain, model, protocol), rs in sorted(_by_row(runs).items()):
         n, sure = sum(r["n"] for r in rs), sum(r["confident"] for r in rs)
         lines.append(f"| {domain} | {model} | {protocol} | {pct(sure, n)} | {pct(sum(r['confident_right'] for r in rs), sure)} | "
                      f"{pct(sum(r['unsure_right'] for r in rs), n - sure)} |")

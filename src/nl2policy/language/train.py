@@ -279,19 +279,7 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
     vocab = get_domain(domain).vocab
     names = vocab.question_ids + vocab.action_ids
     model = TrainedTranslator(domain, name, cfg, words, [], cache or MiniLMCache())
-
-    last: list = []  # (pairs, encoded, golds) of the last draw: members sharing one list encode it once
-
-    def prepare(member_pairs: Sequence[tuple[str, Tree]]) -> tuple[list[Encoded], list]:
-        if not last or last[0] is not member_pairs:
-            encoded = [model.encode(t) for t, _ in member_pairs]
-            if cfg.decoder == "path":
-                golds = [tree_nodes(tree, names, vocab.question_ids) for _, tree in member_pairs]
-            else:
-                golds = [gold_steps(tree, domain, names) for _, tree in member_pairs]
-            last[:] = [member_pairs, encoded, golds]
-        return last[1], last[2]
-
+    encoded_pairs = None  # the pairs last encoded: members sharing one list encode it once
     finished = list(state["finished"]) if state else []
     for member in range(cfg.ensemble):
         torch.manual_seed(seed + member)  # the initial weights: a member is reproducible from its seed
@@ -306,7 +294,14 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
                     on_epoch({"member": member, "finished": list(finished), "epoch": epoch, "net": net.state_dict(),
                               "opt": opt.state_dict(), "rng": rng.getstate(), "torch_rng": torch.get_rng_state()})
 
-            encoded, golds = prepare(draw(member))
+            member_pairs = draw(member)
+            if member_pairs is not encoded_pairs:
+                encoded = [model.encode(t) for t, _ in member_pairs]
+                if cfg.decoder == "path":
+                    golds = [tree_nodes(tree, names, vocab.question_ids) for _, tree in member_pairs]
+                else:
+                    golds = [gold_steps(tree, domain, names) for _, tree in member_pairs]
+                encoded_pairs = member_pairs
             _fit_member(model, net, encoded, golds, len(names), seed + member, resume, checkpoint,
                         None if progress is None else lambda done, total, m=member: progress(m * total + done, cfg.ensemble * total))
             finished.append(net.state_dict())

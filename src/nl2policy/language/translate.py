@@ -20,6 +20,7 @@ import torch
 
 from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.language.corpus import load_corpus
+from nl2policy.language.dataset import member_pairs
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS, ModelConfig
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.text import WordVocab, tokenize
@@ -82,8 +83,6 @@ def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
     ckpt = path.with_suffix(".ckpt")
     path.parent.mkdir(parents=True, exist_ok=True)
     state = torch.load(ckpt, weights_only=False) if ckpt.is_file() else None
-    from nl2policy.language.dataset import member_pairs
-
     specs = load_corpus(domain)
     pairs = member_pairs(domain, specs, range(len(specs)), cfg, seed)
     vocab_texts = [s.description for s in specs]  # the word vocabulary: real descriptions only
