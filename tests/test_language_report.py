@@ -82,18 +82,25 @@ def test_fold_result_counts_confident_and_unsure_translations(monkeypatch, one_t
     assert r["confident_right"] <= r["confident"]
 
 
-def test_summary_sets_beam_and_greedy_accuracy_of_the_same_folds_side_by_side(tmp_path):
+def test_summary_sets_each_decoding_choice_beside_the_same_folds_without_it(tmp_path):
     a = dict(_run("taxi", "m", "cv-r0-f0", "cv", 0.75), greedy_tree_acc=0.5)
     b = dict(_run("taxi", "m", "cv-r0-f1", "cv", 0.5), greedy_tree_acc=0.75)
     c = dict(_run("taxi", "m", "cv-r0-f2", "cv", 0.5), greedy_tree_acc=0.25)
-    plain = _run("taxi", "g", "cv-r0-f0", "cv", 0.5)  # decoded greedily only: not in the beam table
-    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in (a, b, c, plain)))
+    plain = _run("taxi", "g", "cv-r0-f0", "cv", 0.5)  # decoded greedily only: not in the table
+    # with a leaf cost: repeat 0 (where the cost was chosen) apart from the later repeats
+    d = dict(_run("highway", "m", "cv-r0-f0", "cv", 0.75), no_leaf_cost_tree_acc=0.5)
+    e = dict(_run("highway", "m", "cv-r1-f0", "cv", 0.5), no_leaf_cost_tree_acc=0.75)
+    f = dict(_run("highway", "m", "cv-r2-f3", "cv", 1.0), no_leaf_cost_tree_acc=0.75)
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in (a, b, c, plain, d, e, f)))
     md = summarize(tmp_path, "cmd", "budget").read_text()
-    assert "| taxi | m | cv | 3 | 58.33 | 50.00 | 2 / 1 |" in md
-    assert "| taxi | g |" not in md.split("## Beam search")[1]
+    effects = md.split("## Decoding choices")[1]
+    assert "| taxi | m | cv, repeat 0 | 3 | greedy (beam of 1) | 58.33 | 50.00 | 2 / 1 |" in effects
+    assert "| highway | m | cv, repeat 0 | 1 | no early-leaf cost | 75.00 | 50.00 | 1 / 0 |" in effects
+    assert "| highway | m | cv, repeats 1+ | 2 | no early-leaf cost | 75.00 | 75.00 | 1 / 1 |" in effects
+    assert "| taxi | g |" not in effects and "| taxi | m | cv, repeat 0 | 3 | no early-leaf cost" not in effects
 
 
-def test_fold_result_with_a_beam_also_records_greedy_decoding(monkeypatch, one_torch_thread):
+def test_fold_result_with_a_beam_and_a_leaf_cost_also_records_decoding_without_them(monkeypatch, one_torch_thread):
     import dataclasses
 
     from nl2policy.language import evaluate
@@ -101,7 +108,12 @@ def test_fold_result_with_a_beam_also_records_greedy_decoding(monkeypatch, one_t
     from nl2policy.language.models.config import MODELS
     from nl2policy.language.models.pretrained import MiniLMCache
 
-    monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=2, beam=3))
+    monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=2, beam=3, leaf_cost=100.0))
     specs = load_corpus("taxi")[:40]
     r = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
-    assert 0 <= r["greedy_tree_acc"] <= 1 and 0 <= r["tree_acc"] <= 1
+    assert 0 <= r["greedy_tree_acc"] <= 1
+    # the same training without the cost (same seed, same networks) scores what the fold recorded as "without"
+    monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["tiny"], leaf_cost=0.0))
+    plain = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
+    assert plain["tree_acc"] == r["no_leaf_cost_tree_acc"] and "no_leaf_cost_tree_acc" not in plain
+    assert plain["token_acc"] != r["token_acc"]  # a prohibitive cost (full trees only) did change the trees

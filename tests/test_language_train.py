@@ -214,6 +214,34 @@ def test_beam_search_reports_the_networks_own_probabilities_and_mostly_beats_gre
     assert sum(gains) > 0 and sum(g > -1e-6 for g in gains) >= 0.75 * len(gains)
 
 
+def test_early_leaf_cost_grows_trees_and_reports_the_networks_own_probabilities(one_torch_thread):
+    """The cost changes which tree the beam keeps, not the probabilities it reports: a prohibitive
+    cost fills every branch to the depth limit (15 tokens), a moderate one never shrinks the trees
+    on the whole, and the reported node probabilities stay the network's teacher-forced ones."""
+    import math
+
+    from nl2policy.language.train import _targets, collate, gold_steps
+
+    specs = load_corpus("highway")
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, beam=3)
+    model = fit("highway", "one", cfg, [(s.description, s.tree) for s in specs[:48]], seed=0)
+    texts = [s.description for s in specs[48:64]]
+    size = lambda decoded: [len(to_tokens(t)) for t, _ in decoded]
+    plain = model.predict(texts)
+    model.leaf_cost = 100.0
+    assert size(model.predict(texts)) == [15] * len(texts)
+    model.leaf_cost = 1.0
+    costly = model.predict(texts)
+    assert sum(size(costly)) > sum(size(plain))
+    for text, (tree, probs) in zip(texts, costly):
+        steps = gold_steps(tree, "highway", model.tree_tokens)
+        with torch.inference_mode():
+            nll = model.net.loss(collate([model.encode(text)]), *_targets([steps], len(model.tree_tokens)))
+        assert -float(nll) * len(steps[0]) == pytest.approx(sum(math.log(p) for p in probs.values()), abs=1e-4)
+    model.leaf_cost = None  # back to the config's (none): the plain decoding again
+    assert model.predict(texts) == plain
+
+
 def test_members_can_train_on_their_own_draws_of_pairs(one_torch_thread):
     """With a function of the member index, each member reads its own pairs (and is still
     reproducible); the word vocabulary comes from the real texts only."""

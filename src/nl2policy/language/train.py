@@ -50,6 +50,7 @@ class TrainedTranslator:
     cache: MiniLMCache = field(default_factory=MiniLMCache, repr=False)
     history: list[float] = field(default_factory=list, repr=False)  # mean training loss per epoch
     beam: Optional[int] = None  # hypotheses kept while decoding (1 = greedy); None: the config's
+    leaf_cost: Optional[float] = None  # decoding cost of an early leaf (see ModelConfig); None: the config's
     stack_members: bool = True  # flat encoders: decode all members as one batch (False: one by one, same result)
 
     @property
@@ -95,10 +96,15 @@ class TrainedTranslator:
     def _decode(self, items: list[Encoded]) -> list[tuple[Tree, dict[int, float]]]:
         """Beam search under the grammar mask over the members' averaged step probabilities
         (`self.beam` hypotheses per description; 1 is greedy). A tree's score is the sum of its
-        nodes' log-probabilities, so a subtree the text does not support costs its every node."""
+        nodes' log-probabilities, so a subtree the text does not support costs its every node;
+        an action placed where a question could still go also costs `leaf_cost` nats, which
+        offsets that sum's pull towards small trees (the reported probabilities stay the
+        model's own)."""
         vocab = get_domain(self.domain).vocab
         names = self.tree_tokens
         index = {t: i for i, t in enumerate(names)}
+        is_action = torch.tensor([t in vocab.actions for t in names])
+        leaf_cost = self.cfg.leaf_cost if self.leaf_cost is None else self.leaf_cost
         B, K = len(items), max(1, self.beam or self.cfg.beam)
         state = DecoderState(self, collate(items), copies=K)
         prefixes: list[list[str]] = [[] for _ in range(B * K)]
@@ -122,6 +128,9 @@ class TrainedTranslator:
             p = torch.softmax(logits.masked_fill(~mask, -1e9), -1).mean(0)
             done = torch.tensor([s is None for s in slots])
             logp = torch.where(mask, p.clamp(min=1e-12).log(), torch.tensor(-math.inf))
+            if leaf_cost:
+                early = (mask & ~is_action).any(-1, keepdim=True)  # a question was allowed here
+                logp = logp - leaf_cost * (early & is_action)
             logp[done] = torch.where(mask[done], 0.0, -math.inf)
             total = (score.view(B * K, 1) + logp).view(B, K * len(names))
             best, flat = total.topk(K, -1)  # ties keep the lower index: greedy's argmax when K = 1

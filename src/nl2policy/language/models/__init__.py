@@ -6,7 +6,9 @@ Seq2Tree+MiniLM = Seq2Tree whose word inputs are fused with frozen MiniLM layers
 all six layers for the MiniLM models: six read new writers better than three in our checks);
 HAN2Tree = hierarchical (word, sentence) attention encoder + tree decoder;
 seq2tree-minilm-synth = Seq2Tree+MiniLM trained with synthetic pairs as well;
-seq2tree-minilm-synth-x3 (the default) = an ensemble of three of those (decoding averages their steps).
+seq2tree-minilm-synth-x3 (the default) = an ensemble of three of those (decoding averages their steps, beam of 4);
+seq2tree-minilm-synth-x3-leafcost (experimental) = the same ensemble, whose beam also charges a
+branch that ends early (an action where a question could still go) 0.5 nats.
 Configurations live in `config.py`; the network in `network.py`.
 """
 
