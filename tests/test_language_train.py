@@ -2,6 +2,7 @@
 
 import copy
 import dataclasses
+import math
 
 import pytest
 import torch
@@ -187,14 +188,23 @@ def test_stacked_and_member_by_member_decoding_give_the_same_translations(beam, 
         assert a.keys() == b.keys() and all(abs(a[k] - b[k]) < 1e-5 for k in a)
 
 
+def _assert_teacher_forced(model, text: str, tree, probs: dict) -> float:
+    """The node probabilities decoding reported for `tree` multiply to the probability teacher
+    forcing gives that tree (a single network); returns that log-probability."""
+    from nl2policy.language.train import _targets, collate, gold_steps
+
+    logp = sum(math.log(p) for p in probs.values())
+    steps = gold_steps(tree, model.domain, model.tree_tokens)
+    with torch.inference_mode():
+        nll = model.net.loss(collate([model.encode(text)]), *_targets([steps], len(model.tree_tokens)))
+    assert -float(nll) * len(steps[0]) == pytest.approx(logp, abs=1e-4)
+    return logp
+
+
 def test_beam_search_reports_the_networks_own_probabilities_and_mostly_beats_greedy(one_torch_thread):
     """The beam's hypotheses are reordered every step; if a state were carried to the wrong
     hypothesis, the node probabilities it reports would not be the network's probabilities of
     that tree, which teacher forcing computes independently."""
-    import math
-
-    from nl2policy.language.train import _targets, collate, gold_steps
-
     specs = load_corpus("highway")
     cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16)
     model = fit("highway", "one", cfg, [(s.description, s.tree) for s in specs[:48]], seed=0)
@@ -204,11 +214,7 @@ def test_beam_search_reports_the_networks_own_probabilities_and_mostly_beats_gre
     beamed = model.predict(texts)
     gains = []
     for text, (tree, probs), (_, greedy_probs) in zip(texts, beamed, greedy):
-        logp = sum(math.log(p) for p in probs.values())
-        steps = gold_steps(tree, "highway", model.tree_tokens)
-        with torch.inference_mode():
-            nll = model.net.loss(collate([model.encode(text)]), *_targets([steps], len(model.tree_tokens)))
-        assert -float(nll) * len(steps[0]) == pytest.approx(logp, abs=1e-4)
+        logp = _assert_teacher_forced(model, text, tree, probs)
         gains.append(logp - sum(math.log(p) for p in greedy_probs.values()))
     # beam search may end below greedy on a text (greedy's path can be pruned), but not usually
     assert sum(gains) > 0 and sum(g > -1e-6 for g in gains) >= 0.75 * len(gains)
@@ -218,10 +224,6 @@ def test_early_leaf_cost_grows_trees_and_reports_the_networks_own_probabilities(
     """The cost changes which tree the beam keeps, not the probabilities it reports: a prohibitive
     cost fills every branch to the depth limit (15 tokens), a moderate one never shrinks the trees
     on the whole, and the reported node probabilities stay the network's teacher-forced ones."""
-    import math
-
-    from nl2policy.language.train import _targets, collate, gold_steps
-
     specs = load_corpus("highway")
     cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, beam=3)
     model = fit("highway", "one", cfg, [(s.description, s.tree) for s in specs[:48]], seed=0)
@@ -234,10 +236,7 @@ def test_early_leaf_cost_grows_trees_and_reports_the_networks_own_probabilities(
     costly = model.predict(texts)
     assert sum(size(costly)) > sum(size(plain))
     for text, (tree, probs) in zip(texts, costly):
-        steps = gold_steps(tree, "highway", model.tree_tokens)
-        with torch.inference_mode():
-            nll = model.net.loss(collate([model.encode(text)]), *_targets([steps], len(model.tree_tokens)))
-        assert -float(nll) * len(steps[0]) == pytest.approx(sum(math.log(p) for p in probs.values()), abs=1e-4)
+        _assert_teacher_forced(model, text, tree, probs)
     model.leaf_cost = None  # back to the config's (none): the plain decoding again
     assert model.predict(texts) == plain
 

@@ -27,6 +27,10 @@ from nl2policy.trees import GRID_SLOTS, Tree, TreeError, to_grid
 from nl2policy.trees.parse import validate
 
 PAPER_HAN2TREE = {"taxi": 86.30, "highway": 80.38}
+# decoding choices a fold also scores switched off (same networks): record key -> (TrainedTranslator
+# and ModelConfig attribute, its "off" value, label in the summary)
+DECODING_ALTERNATIVES = {"greedy_tree_acc": ("beam", 1, "greedy (beam of 1)"),
+                         "no_leaf_cost_tree_acc": ("leaf_cost", 0.0, "no early-leaf cost")}
 
 
 def slot_accuracy(pred: Tree, gold: Tree) -> float:
@@ -69,14 +73,12 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     right = [p == g for p, g in zip(preds, golds)]
     result.update(confident=sum(sure), confident_right=sum(s and r for s, r in zip(sure, right)),
                   unsure_right=sum(r and not s for s, r in zip(sure, right)))
-    # the same networks on the same fold, decoded other ways, side by side
-    if model.cfg.leaf_cost:
-        model.leaf_cost = 0.0
-        result.update(no_leaf_cost_tree_acc=score(domain, [t for t, _ in model.predict(texts)], golds)["tree_acc"])
-        model.leaf_cost = None
-    if model.cfg.beam > 1:
-        model.beam = 1
-        result.update(greedy_tree_acc=score(domain, [t for t, _ in model.predict(texts)], golds)["tree_acc"])
+    # the same networks on the same fold, decoded without each of the config's decoding choices
+    for key, (attr, off, _) in DECODING_ALTERNATIVES.items():
+        if getattr(model.cfg, attr) != off:
+            setattr(model, attr, off)
+            result[key] = score(domain, [t for t, _ in model.predict(texts)], golds)["tree_acc"]
+            setattr(model, attr, None)  # back to the config's
     result.update(train_pairs=len(pairs(0) if callable(pairs) else pairs), seconds=round(time.time() - start, 1))
     return result
 
@@ -178,15 +180,12 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
     return md
 
 
-DECODING_ALTERNATIVES = {"greedy_tree_acc": "greedy (beam of 1)", "no_leaf_cost_tree_acc": "no early-leaf cost"}
-
-
 def _decoding_effects(runs: list[dict]) -> list[str]:
     """Models decoded with a beam or an early-leaf cost also record the same networks on the
     same folds decoded without it: each choice's own effect, side by side. CV repeat 0 gets its
     own line because the experimental leaf cost was chosen on an exploratory run of those folds."""
     lines = []
-    for key, label in DECODING_ALTERNATIVES.items():
+    for key, (_, _, label) in DECODING_ALTERNATIVES.items():
         groups: dict[tuple[str, str, str], list[dict]] = {}
         for r in runs:
             if key in r:
