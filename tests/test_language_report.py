@@ -111,9 +111,44 @@ def test_fold_result_with_a_beam_and_a_leaf_cost_also_records_decoding_without_t
     monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=2, beam=3, leaf_cost=100.0))
     specs = load_corpus("taxi")[:40]
     r = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
-    assert 0 <= r["greedy_tree_acc"] <= 1
+    assert 0 <= r["greedy_tree_acc"] <= 1 and "first_3_members_tree_acc" not in r  # one network: no smaller ensemble
     # the same training without the cost (same seed, same networks) scores what the fold recorded as "without"
     monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["tiny"], leaf_cost=0.0))
     plain = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
     assert plain["tree_acc"] == r["no_leaf_cost_tree_acc"] and "no_leaf_cost_tree_acc" not in plain
     assert plain["token_acc"] != r["token_acc"]  # a prohibitive cost (full trees only) did change the trees
+
+
+def test_summary_sets_each_variant_of_the_default_beside_it_on_the_folds_both_ran(tmp_path, monkeypatch):
+    import dataclasses
+
+    from nl2policy.language.models.config import DEFAULT_MODEL as base, MODELS
+
+    monkeypatch.setitem(MODELS, base + "-x", dataclasses.replace(MODELS[base], ensemble=6, beam=1))
+    monkeypatch.setitem(MODELS, "other", dataclasses.replace(MODELS[base], synthetic=0))  # other training data
+
+    runs = [_run("taxi", base, f"cv-r{r}-f0", "cv", acc) for r, acc in ((0, 0.5), (1, 1.0), (2, 1.0))]
+    runs += [_run("taxi", base + "-x", "cv-r0-f0", "cv", 0.75),  # the default's other repeats must not count
+             _run("taxi", base + "-x", "writers-f0", "writers", 1.0),  # no default fold to set beside it
+             _run("taxi", "other", "cv-r0-f0", "cv", 0.0),  # not a variant of the default
+             _run("taxi", "seq2seq", "cv-r0-f0", "cv", 0.0)]  # nor is a baseline
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
+    part = summarize(tmp_path, "cmd", "budget").read_text().split("## Variants")[1]
+    assert f"| taxi | {base}-x | cv | 1 | 75.00 | 50.00 | 1 / 0 |" in part
+    assert "writers" not in part and "| taxi | other |" not in part and "seq2seq" not in part
+
+
+def test_fold_result_of_a_larger_ensemble_also_records_its_first_three_members(monkeypatch, one_torch_thread):
+    import dataclasses
+
+    from nl2policy.language import evaluate
+    from nl2policy.language.corpus import load_corpus
+    from nl2policy.language.models.config import MODELS
+    from nl2policy.language.models.pretrained import MiniLMCache
+
+    specs = load_corpus("taxi")[:40]
+    monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=1, ensemble=4, member_draws=True))
+    r = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
+    monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["tiny"], ensemble=3))
+    three = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
+    assert r["first_3_members_tree_acc"] == three["tree_acc"] and "first_3_members_tree_acc" not in three

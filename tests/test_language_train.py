@@ -16,18 +16,19 @@ from nl2policy.language.train import fit
 from nl2policy.trees import to_tokens
 
 
-def test_fold_training_data_reads_only_training_indices(monkeypatch):
+@pytest.mark.parametrize("name", [DEFAULT_MODEL, "seq2tree-minilm-synth-x3-swap"])
+def test_fold_training_data_reads_only_training_indices(monkeypatch, name):
     specs = load_corpus("taxi")
     train, test = next(kfold(specs, 5, seed=0))
     touched = []
     real_augment = dataset.augment_fold
 
-    def spy(specs_, idx, copies, seed=0):
+    def spy(specs_, idx, copies, seed=0, swap=False):
         touched.extend(idx)
-        return real_augment(specs_, idx, copies, seed)
+        return real_augment(specs_, idx, copies, seed, swap)
 
     monkeypatch.setattr(dataset, "augment_fold", spy)
-    pairs = training_pairs("taxi", specs, train, MODELS[DEFAULT_MODEL])
+    pairs = training_pairs("taxi", specs, train, MODELS[name])
     assert touched and set(touched) <= set(train)
     test_texts = {specs[i].description for i in test}
     test_copies = {augment_text(specs[i].description, specs[i].id, c) for i in test for c in range(3)}
@@ -261,3 +262,21 @@ def test_members_can_train_on_their_own_draws_of_pairs(one_torch_thread):
         for p1, p2 in zip(n1.parameters(), n2.parameters()):
             assert torch.equal(p1, p2)
     assert member_pairs("taxi", specs, range(30), dataclasses.replace(cfg, member_draws=False)) == first
+
+
+def test_decoding_with_the_first_members_equals_training_only_those(one_torch_thread):
+    """Members train independently (seed + m, draw + m), so decoding a 4-member model with its
+    first 3 networks is the 3-member model trained alone: the record the experiment keeps for an
+    ensemble larger than the default's."""
+    specs = load_corpus("highway")
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=2, batch=16, ensemble=4, member_draws=True)
+    draws = dataset.member_pairs("highway", specs, range(48), cfg)
+    four = fit("highway", "ens", cfg, draws, seed=0)
+    three = fit("highway", "ens", dataclasses.replace(cfg, ensemble=3), draws, seed=0)
+    texts = [s.description for s in specs[48:72]]
+    all_four = four.predict(texts)
+    four.ensemble = 3
+    first_three, alone = four.predict(texts), three.predict(texts)
+    assert [t for t, _ in first_three] == [t for t, _ in alone]
+    assert all(a == b for (_, a), (_, b) in zip(first_three, alone))  # same networks: same probabilities
+    assert any(a != b for (_, a), (_, b) in zip(all_four, first_three))  # the fourth member did count

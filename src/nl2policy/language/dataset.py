@@ -19,7 +19,7 @@ from nl2policy.trees import Tree
 def training_pairs(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], cfg: ModelConfig,
                    seed: int = 0) -> list[tuple[str, Tree]]:
     pairs = [(specs[i].description, specs[i].tree) for i in train_idx]
-    pairs += augment_fold(specs, train_idx, cfg.aug_copies, seed)
+    pairs += augment_fold(specs, train_idx, cfg.aug_copies, seed, swap=cfg.aug_swap)
     if cfg.synthetic:
         pairs += synthetic_pairs(domain, cfg.synthetic, seed, [specs[i].tree for i in train_idx], cfg.synth_per_tree)
     return pairs

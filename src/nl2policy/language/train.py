@@ -51,6 +51,7 @@ class TrainedTranslator:
     history: list[float] = field(default_factory=list, repr=False)  # mean training loss per epoch
     beam: Optional[int] = None  # hypotheses kept while decoding (1 = greedy); None: the config's
     leaf_cost: Optional[float] = None  # decoding cost of an early leaf (see ModelConfig); None: the config's
+    ensemble: Optional[int] = None  # decode with the first n networks only; None: all of them
     stack_members: bool = True  # flat encoders: decode all members as one batch (False: one by one, same result)
 
     @property
@@ -160,7 +161,7 @@ class DecoderState:
     def __init__(self, model: TrainedTranslator, batch: Batch, copies: int = 1) -> None:
         """`copies` hypotheses per description (rows b*copies ... b*copies+copies-1): each
         description is encoded once, then its memory repeated."""
-        self.nets = model.nets
+        self.nets = model.nets[:model.ensemble] if model.ensemble else model.nets
         self.memories = [{k: v.repeat_interleave(copies, 0) for k, v in net.encode(batch).items()} for net in self.nets]
         h0 = torch.stack([m["h0"] for m in self.memories])  # (E, B, h)
         E, B, h = h0.shape

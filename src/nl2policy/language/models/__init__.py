@@ -9,6 +9,9 @@ seq2tree-minilm-synth = Seq2Tree+MiniLM trained with synthetic pairs as well;
 seq2tree-minilm-synth-x3 (the default) = an ensemble of three of those (decoding averages their steps, beam of 4);
 seq2tree-minilm-synth-x3-leafcost (experimental) = the same ensemble, whose beam also charges a
 branch that ends early (an action where a question could still go) 0.5 nats.
+seq2tree-minilm-synth-x3-swap (experimental) = the default trained with counterfactual augmented
+copies (the actions a description names permuted in text and tree, language/counterfactual.py);
+seq2tree-minilm-synth-x6 (measured, not a default) = six members instead of three: twice the training time.
 Configurations live in `config.py`; the network in `network.py`.
 """
 
