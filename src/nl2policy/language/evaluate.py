@@ -196,10 +196,8 @@ def _decoding_effects(runs: list[dict]) -> list[str]:
                 part = r["protocol"] if r["protocol"] != "cv" else ("cv, repeat 0" if "-r0-" in r["fold"] else "cv, repeats 1+")
                 groups.setdefault((r["domain"], r["model"], part), []).append(r)
         for (domain, model, part), rs in sorted(groups.items()):
-            ours, other = [100 * r["tree_acc"] for r in rs], [100 * r[key] for r in rs]
-            better, worse = sum(a > b for a, b in zip(ours, other)), sum(a < b for a, b in zip(ours, other))
-            lines.append(f"| {domain} | {model} | {part} | {len(rs)} | {label} | {mean(ours):.2f} | {mean(other):.2f} | "
-                         f"{better} / {worse} |")
+            lines.append(f"| {domain} | {model} | {part} | {len(rs)} | {label} | "
+                         + _paired_cells([(100 * r["tree_acc"], 100 * r[key]) for r in rs]))
     if not lines:
         return []
     return ["", "## Decoding choices, each against the same trained networks decoded with less of it (same folds)", "",
@@ -229,10 +227,14 @@ def _variants(runs: list[dict], base: str = DEFAULT_MODEL) -> list[str]:
              "| domain | variant | protocol | folds | variant tree acc | default tree acc | folds better / worse |",
              "|---|---|---|---:|---:|---:|---|"]
     for (domain, model, protocol), pairs in sorted(groups.items()):
-        ours, theirs = [a for a, _ in pairs], [b for _, b in pairs]
-        lines.append(f"| {domain} | {model} | {protocol} | {len(pairs)} | {mean(ours):.2f} | {mean(theirs):.2f} | "
-                     f"{sum(a > b for a, b in pairs)} / {sum(a < b for a, b in pairs)} |")
+        lines.append(f"| {domain} | {model} | {protocol} | {len(pairs)} | " + _paired_cells(pairs))
     return lines
+
+
+def _paired_cells(pairs: list[tuple[float, float]]) -> str:
+    """The last three cells of a paired-comparison row: both means and folds better / worse."""
+    return (f"{mean(a for a, _ in pairs):.2f} | {mean(b for _, b in pairs):.2f} | "
+            f"{sum(a > b for a, b in pairs)} / {sum(a < b for a, b in pairs)} |")
 
 
 def held_out_writers(domain: str) -> dict[str, str]:
