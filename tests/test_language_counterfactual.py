@@ -7,9 +7,10 @@ import pytest
 from nl2policy.domains import get_domain
 from nl2policy.language.augment import augment_fold
 from nl2policy.language.corpus import load_corpus
-from nl2policy.language.counterfactual import GROUPS, _leaves, _mentions, swap_actions
+from nl2policy.language.counterfactual import GROUPS, _mentions, swap_actions
 from nl2policy.trees import Leaf, Node
 from nl2policy.trees.parse import validate
+from nl2policy.trees.tree import iter_leaves
 
 TAXI_TEXT = ("If you have a passenger, drive straight to the airport. If not, check whether you are in the "
              "village: in the village, wait; anywhere else, head for the village.")
@@ -64,7 +65,7 @@ def test_every_corpus_copy_is_valid_and_its_text_names_exactly_its_new_actions(d
         validate(tree, vocab)
         assert tree != spec.tree
         for group in GROUPS[domain]:
-            assert {a for *_, a in _mentions(group, text)} == _leaves(tree) & set(group.actions), spec.id
+            assert {a for *_, a in _mentions(group, text)} == {l.action for l in iter_leaves(tree)} & set(group.actions), spec.id
     assert made >= len(load_corpus(domain)) // 2
 
 

@@ -24,6 +24,7 @@ from itertools import permutations
 from typing import Optional
 
 from nl2policy.trees import Leaf, Node, Tree
+from nl2policy.trees.tree import iter_leaves
 
 
 @dataclass(frozen=True)
@@ -85,10 +86,6 @@ def _mentions(group: ActionGroup, text: str) -> list[tuple[int, int, str, str]]:
     return out
 
 
-def _leaves(tree: Tree) -> set[str]:
-    return {tree.action} if isinstance(tree, Leaf) else _leaves(tree.yes) | _leaves(tree.no)
-
-
 def _relabel(tree: Tree, mapping: dict[str, str]) -> Tree:
     if isinstance(tree, Leaf):
         return Leaf(mapping.get(tree.action, tree.action))
@@ -104,7 +101,7 @@ def swap_actions(domain: str, text: str, tree: Tree, rng: random.Random) -> Opti
     or None when the text's mentions do not account for the tree's actions (or nothing would change)."""
     edits: list[tuple[int, int, str]] = []
     mapping: dict[str, str] = {}
-    tree_actions = _leaves(tree)
+    tree_actions = {leaf.action for leaf in iter_leaves(tree)}
     for group in GROUPS.get(domain, []):
         found = _mentions(group, text)
         named = {action for *_, action in found}

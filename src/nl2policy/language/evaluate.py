@@ -216,18 +216,15 @@ def _variants(runs: list[dict], base: str = DEFAULT_MODEL) -> list[str]:
     repeats, since one fold moves by several points with the training run alone."""
     same = lambda name: name in MODELS and all(getattr(MODELS[name], f) == getattr(MODELS[base], f) for f in VARIANT_FIELDS)
     ref = {(r["domain"], r["fold"]): 100 * r["tree_acc"] for r in runs if r["model"] == base}
-    groups: dict[tuple[str, str, str], list[tuple[float, float]]] = {}
-    for r in runs:
-        if r["model"] != base and same(r["model"]) and (r["domain"], r["fold"]) in ref:
-            groups.setdefault((r["domain"], r["model"], r["protocol"]), []).append(
-                (100 * r["tree_acc"], ref[(r["domain"], r["fold"])]))
-    if not groups:
+    rows = _by_row([r for r in runs if r["model"] != base and same(r["model"]) and (r["domain"], r["fold"]) in ref])
+    if not rows:
         return []
     lines = ["", f"## Variants of the default ({base}), each beside the default on the same folds", "",
              "| domain | variant | protocol | folds | variant tree acc | default tree acc | folds better / worse |",
              "|---|---|---|---:|---:|---:|---|"]
-    for (domain, model, protocol), pairs in sorted(groups.items()):
-        lines.append(f"| {domain} | {model} | {protocol} | {len(pairs)} | " + _paired_cells(pairs))
+    for (domain, model, protocol), rs in sorted(rows.items()):
+        lines.append(f"| {domain} | {model} | {protocol} | {len(rs)} | "
+                     + _paired_cells([(100 * r["tree_acc"], ref[(r["domain"], r["fold"])]) for r in rs]))
     return lines
 
 
