@@ -111,15 +111,18 @@ def test_ensemble_averages_members_and_resumes_from_a_checkpoint(one_torch_threa
     pairs = [(s.description, s.tree) for s in subset]
     checkpoints = []  # what a checkpoint file would hold: a snapshot at that epoch
     full = fit("taxi", "ens", cfg, pairs, seed=0, on_epoch=lambda c: checkpoints.append(copy.deepcopy(c)))
-    assert len(full.nets) == 2 and len(checkpoints) == 24
-    assert [c["member"] for c in checkpoints] == [0] * 12 + [1] * 12
-    assert [len(c["finished"]) for c in checkpoints] == [0] * 12 + [1] * 12
+    # one checkpoint after each epoch of each member, and one as each member finishes
+    assert len(full.nets) == 2 and len(checkpoints) == 26
+    assert [sorted(c["partial"]) for c in checkpoints] == [[0]] * 12 + [[]] + [[1]] * 12 + [[]]
+    assert [sorted(c["finished"]) for c in checkpoints] == [[]] * 12 + [[0]] * 13 + [[0, 1]]
+    assert checkpoints[16]["partial"][1]["epoch"] == 4
     a, b = (list(n.parameters())[-1] for n in full.nets)
     assert not torch.equal(a, b)  # different seeds, different members
-    resumed = fit("taxi", "ens", cfg, pairs, seed=0, state=checkpoints[15])  # member 1 after epoch 4
+    resumed = fit("taxi", "ens", cfg, pairs, seed=0, state=checkpoints[16])  # member 1 after epoch 4
     for n1, n2 in zip(full.nets, resumed.nets):
         for p1, p2 in zip(n1.parameters(), n2.parameters()):
-            assert torch.allclose(p1, p2)
+            assert torch.equal(p1, p2)
+    assert resumed.history == full.history
     from nl2policy.domains import get_domain
     from nl2policy.language.grammar import allowed_tokens, next_slot
     from nl2policy.language.train import collate
@@ -141,6 +144,42 @@ def test_ensemble_averages_members_and_resumes_from_a_checkpoint(one_torch_threa
         token = to_tokens(tree)[0]
         assert token == full.tree_tokens[int(mean[i].argmax())]  # the ensemble picks the averaged argmax
         assert probs[0] == pytest.approx(float(mean[i].max()), abs=1e-5)
+
+
+def test_members_trained_in_worker_processes_equal_members_trained_one_by_one(one_torch_thread):
+    """Each member depends only on its seed and its draw, so forked workers (one thread each)
+    give the same networks; their checkpoints come back to the parent and resume there."""
+    specs = load_corpus("taxi")[:24]
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, ensemble=3)
+    draws = {m: [(s.description, s.tree) for s in specs[m:m + 20]] for m in range(3)}  # each member its own draw
+    progress, checkpoints = [], []
+    one_by_one = fit("taxi", "w", cfg, draws.__getitem__, seed=5)
+    forked = fit("taxi", "w", cfg, draws.__getitem__, seed=5, workers=2, progress=lambda d, t: progress.append((d, t)),
+                 on_epoch=lambda c: checkpoints.append(copy.deepcopy(c)))
+    for n1, n2 in zip(one_by_one.nets, forked.nets, strict=True):
+        for p1, p2 in zip(n1.parameters(), n2.parameters()):
+            assert torch.equal(p1, p2)
+    assert forked.history == one_by_one.history
+    assert progress[-1][0] == progress[-1][1] and len(checkpoints) == 3 * 3 + 3
+    assert sorted(checkpoints[-1]["finished"]) == [0, 1, 2] and not checkpoints[-1]["partial"]
+    interrupted = next(c for c in checkpoints if c["partial"].get(2, {}).get("epoch") == 1)
+    resumed = fit("taxi", "w", cfg, draws.__getitem__, seed=5, workers=2, state=interrupted)
+    for n1, n2 in zip(one_by_one.nets, resumed.nets):
+        for p1, p2 in zip(n1.parameters(), n2.parameters()):
+            assert torch.equal(p1, p2)
+
+
+def test_a_failing_worker_stops_training_with_its_error(one_torch_thread):
+    specs = load_corpus("taxi")[:10]
+    cfg = dataclasses.replace(MODELS["smoke"], ensemble=2)
+
+    def draw(member):
+        if member == 1:
+            raise ValueError("no pairs for member 1")
+        return [(s.description, s.tree) for s in specs]
+
+    with pytest.raises(RuntimeError, match="member 1 failed: ValueError: no pairs for member 1"):
+        fit("taxi", "w", cfg, draw, workers=2)
 
 
 def test_training_is_reproducible_from_the_seed(one_torch_thread):

@@ -21,6 +21,8 @@ def train_translator(
     model: Optional[str] = typer.Option(None, help="Model name (default: the best model)"),
     seed: int = typer.Option(0),
     out: Optional[Path] = typer.Option(None, help="Folder to save into (default: $NL2POLICY_HOME/models)"),
+    workers: Optional[int] = typer.Option(None, min=1, help="Processes training ensemble members side by side "
+                                          "(default: one per CPU core); the trained networks do not depend on it"),
 ) -> None:
     """Train a translator on the whole shared corpus and save it as the domain's model (resumes
     from its checkpoint if a run was interrupted)."""
@@ -34,7 +36,8 @@ def train_translator(
         fail(f"unknown model {name!r}; known: {', '.join(MODELS)}")
     with progress_bar() as bar:
         task = bar.add_task(f"training {name} for {domain}", total=None)
-        path = train_default(domain, name, seed, progress=lambda done, total: bar.update(task, completed=done, total=total), out=out)
+        path = train_default(domain, name, seed, progress=lambda done, total: bar.update(task, completed=done, total=total), out=out,
+                             workers=workers)
     err.print(f"saved {path}")
 
 

@@ -9,7 +9,9 @@ so no caller mistakes it for a confident answer.
 from __future__ import annotations
 
 import math
+import os
 import sys
+import threading
 from collections import Counter
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -71,10 +73,12 @@ def find_model(domain: str, name: str = DEFAULT_MODEL) -> Optional[Path]:
 
 
 def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
-                  progress: Optional[Callable[[int, int], None]] = None, out: Optional[Path] = None) -> Path:
+                  progress: Optional[Callable[[int, int], None]] = None, out: Optional[Path] = None,
+                  workers: Optional[int] = None) -> Path:
     """Train on the whole shared corpus and save into `out` (default: the user's model folder);
     resumes from `<model>.ckpt` if one exists. The file holds the config and word vocabulary
-    too, so loading it needs nothing else."""
+    too, so loading it needs nothing else. An ensemble's members train in `workers` processes
+    (default: one per CPU core, at most one per member); the networks do not depend on it."""
     get_domain(domain)
     if name not in MODELS:
         raise KeyError(f"unknown model {name!r}; known: {', '.join(MODELS)}")
@@ -83,6 +87,9 @@ def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
     ckpt = path.with_suffix(".ckpt")
     path.parent.mkdir(parents=True, exist_ok=True)
     state = torch.load(ckpt, weights_only=False) if ckpt.is_file() else None
+    if state is not None and "partial" not in state:
+        print(f"ignoring {ckpt}: a checkpoint of an older version; training afresh", file=sys.stderr)
+        state = None
     specs = load_corpus(domain)
     pairs = member_pairs(domain, specs, range(len(specs)), cfg, seed)
     vocab_texts = [s.description for s in specs]  # the word vocabulary: real descriptions only
@@ -92,7 +99,8 @@ def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
         torch.save(checkpoint, tmp)
         tmp.replace(ckpt)
 
-    model = fit(domain, name, cfg, pairs, seed, progress=progress, vocab_texts=vocab_texts, state=state, on_epoch=save_checkpoint)
+    model = fit(domain, name, cfg, pairs, seed, progress=progress, vocab_texts=vocab_texts, state=state, on_epoch=save_checkpoint,
+                workers=workers or min(len(os.sched_getaffinity(0)), cfg.ensemble))
     tmp = path.with_suffix(".tmp")
     torch.save({"domain": domain, "name": name, "cfg": cfg.to_dict(), "words": model.words.itos[2:],
                 "nets": [net.state_dict() for net in model.nets], "lexicon": topic_lexicon(domain)}, tmp)
@@ -153,7 +161,9 @@ def get_model(domain: str, name: str = DEFAULT_MODEL) -> LoadedModel:
                     last[0] = pct // 10
                     print(f"  training {domain} translator: {pct}%", file=sys.stderr)
 
-            train_default(domain, name, progress=report)
+            # members train in forked processes, unless other threads run here (a server):
+            # a fork copies only this thread, and a lock another one holds stays locked
+            train_default(domain, name, progress=report, workers=1 if threading.active_count() > 1 else None)
         _LOADED[key] = load_model(path)
     return _LOADED[key]
 
