@@ -287,8 +287,10 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
     from `vocab_texts` (the real training descriptions) or the first member's pairs.
 
     A member depends only on its seed and its draw, so with `workers` > 1 the members train in
-    that many forked processes of one CPU thread each: on a 2-core machine an ensemble trains in
-    about half the time, into the same networks as one thread training them one by one.
+    that many forked processes of one CPU thread each, into the same networks as one thread
+    training them one by one. It takes ceil(members / workers) rounds instead of one per
+    member: three members on two cores train 1.16x faster than one by one on two threads
+    (benchmarks/translator_speed.py; the third round leaves a core idle), four in the same time.
 
     After every epoch of any member, `on_epoch` gets a checkpoint dict (see `_Checkpoint`);
     passing one back as `state` resumes there."""
@@ -332,7 +334,6 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
             ckpt.finish(member, *train_member(member, lambda n, of, m=member: report(m, n, of),
                                                lambda c, m=member: ckpt.save(m, c)))
     for member in range(cfg.ensemble):
-        torch.manual_seed(seed + member)
         net = model.new_net()
         net.load_state_dict(ckpt.finished[member])
         model.nets.append(net.eval())

@@ -56,9 +56,10 @@ MODELS: dict[str, ModelConfig] = {
     "seq2tree-minilm-synth-x3-leafcost": ModelConfig("flat", "tree", True, 200, minilm_layers=6, ensemble=3,
                                                      member_draws=True, beam=4, leaf_cost=0.5),
     # measured, not a default: twice the members. Members are trained independently (member m:
-    # seed s + m, its own draw s + m), so its first three are the default's three. On CV repeat 0
-    # it beat the default by 2 points in both domains, 4 folds of 5 (results/translation/translation.md,
-    # "Variants"), but it costs twice the default's training time, over the 5-minute budget
+    # seed s + m, its own draw s + m), so its first three are the default's three. On 5-fold CV x 3
+    # it beat the default on the same folds by about 2 points in both domains (results/translation/
+    # translation.md, "Variants"), but it trains 6 members against 3: with two worker processes,
+    # three rounds against two, and the default's two already take most of the 5-minute budget
     "seq2tree-minilm-synth-x6": ModelConfig("flat", "tree", True, 200, minilm_layers=6, ensemble=6, member_draws=True, beam=4),
     # experimental: the default with counterfactual augmented copies (actions permuted in text and
     # tree, language/counterfactual.py), against the corpus's habit of one action per branch. On CV
