@@ -36,6 +36,7 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     from nl2policy.language.corpus import load_corpus
     from nl2policy.language.dataset import training_pairs
+    from nl2policy.language.members import default_workers
     from nl2policy.language.models.pretrained import encode_tokens
     from nl2policy.language.text import split_sentences
     from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
@@ -59,7 +60,7 @@ def main() -> None:
     if shipped.is_file():  # the shipped file was trained one member at a time, one thread
         a, b = (torch.load(p, weights_only=False)["nets"] for p in (trained, shipped))
         same_as_shipped = "yes" if all(torch.equal(x[k], y[k]) for x, y in zip(a, b, strict=True) for k in x) else "NO"
-    workers = min(len(os.sched_getaffinity(0)), cfg.ensemble)
+    workers = default_workers(cfg)
     one_by_one_s = None
     if not args.no_compare:
         start = time.perf_counter()

@@ -1,19 +1,17 @@
 """Turning (description, tree) pairs into tensors, the training loop, and constrained decoding.
 
 `fit` is the whole training loop in plain view (Adam, teacher forcing, a few epochs), run
-once per member of a small ensemble; `TrainedTranslator.predict` runs a beam search (greedy
+once per member of a small ensemble (members.py: their checkpoints, and worker processes to
+train them side by side); `TrainedTranslator.predict` runs a beam search (greedy
 with a beam of one) under the grammar mask with the members' probabilities averaged, so every
 output is a valid tree, and returns each node's probability for the confidence score.
 """
 
 from __future__ import annotations
 
-import io
 import math
-import multiprocessing
 import random
 from dataclasses import dataclass, field
-from queue import Empty
 from typing import Callable, Optional, Sequence, Union
 
 import numpy as np
@@ -21,6 +19,7 @@ import torch
 
 from nl2policy.domains import get_domain
 from nl2policy.language.grammar import allowed_tokens, next_slot
+from nl2policy.language.members import MemberCheckpoints, train_forked
 from nl2policy.language.models.config import ModelConfig
 from nl2policy.language.models.network import Batch, StackedDecoder, Translator
 from nl2policy.language.models.pathnet import decode_paths, tree_nodes
@@ -292,28 +291,28 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
     member: three members on two cores train 1.16x faster than one by one on two threads
     (benchmarks/translator_speed.py; the third round leaves a core idle), four in the same time.
 
-    After every epoch of any member, `on_epoch` gets a checkpoint dict (see `_Checkpoint`);
+    After every epoch of any member, `on_epoch` gets a checkpoint dict (see `members.MemberCheckpoints`);
     passing one back as `state` resumes there."""
     draw = pairs if callable(pairs) else (lambda member: pairs)
     words = WordVocab.build(vocab_texts if vocab_texts is not None else [t for t, _ in draw(0)])
     vocab = get_domain(domain).vocab
     names = vocab.question_ids + vocab.action_ids
     model = TrainedTranslator(domain, name, cfg, words, [], cache or MiniLMCache())
-    ckpt = _Checkpoint(state, on_epoch)
-    encoded_pairs: list = [None, None, None]  # (pairs, encoded, golds) last encoded: members sharing one list encode it once
+    ckpt = MemberCheckpoints(state, on_epoch)
+    last_pairs, encoded, golds = None, [], []  # the pairs last encoded: members sharing one list encode it once
 
     def train_member(member: int, report: Optional[Callable[[int, int], None]], save: Callable[[dict], None]) -> tuple[dict, list[float]]:
+        nonlocal last_pairs, encoded, golds
         torch.manual_seed(seed + member)  # the initial weights: a member is reproducible from its seed
         net = model.new_net()
         member_pairs = draw(member)
-        if member_pairs is not encoded_pairs[0]:
+        if member_pairs is not last_pairs:
             if cfg.decoder == "path":
                 golds = [tree_nodes(tree, names, vocab.question_ids) for _, tree in member_pairs]
             else:
                 golds = [gold_steps(tree, domain, names) for _, tree in member_pairs]
-            encoded_pairs[:] = [member_pairs, [model.encode(t) for t, _ in member_pairs], golds]
-        history = _fit_member(model, net, encoded_pairs[1], encoded_pairs[2], len(names), seed + member,
-                              ckpt.partial.get(member), save, report)
+            last_pairs, encoded = member_pairs, [model.encode(t) for t, _ in member_pairs]
+        history = _fit_member(model, net, encoded, golds, len(names), seed + member, ckpt.partial.get(member), save, report)
         return net.state_dict(), history
 
     todo = [m for m in range(cfg.ensemble) if m not in ckpt.finished]
@@ -328,7 +327,7 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
         if vocab_texts is not None:  # encode the shared real descriptions once, before the fork
             for text in vocab_texts:
                 model.encode(text)
-        _train_forked(todo, train_member, workers, report, ckpt)
+        train_forked(todo, train_member, workers, report, ckpt)
     else:
         for member in todo:
             ckpt.finish(member, *train_member(member, lambda n, of, m=member: report(m, n, of),
@@ -339,92 +338,6 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
         model.nets.append(net.eval())
         model.history += ckpt.history[member]
     return model
-
-
-class _Checkpoint:
-    """What a resumable ensemble training has done: {"finished": {member: network state},
-    "history": {member: mean loss per epoch}, "partial": {member: that member's network,
-    optimizer and random states after its last epoch}}. Every save passes the whole dict on."""
-
-    def __init__(self, state: Optional[dict], on_epoch: Optional[Callable[[dict], None]]) -> None:
-        if state is not None and "partial" not in state:
-            raise ValueError("this checkpoint comes from an older version of nl2policy; delete it to train afresh")
-        state = state or {}
-        self.finished: dict[int, dict] = dict(state.get("finished", {}))
-        self.history: dict[int, list[float]] = dict(state.get("history", {}))
-        self.partial: dict[int, dict] = dict(state.get("partial", {}))
-        self.on_epoch = on_epoch
-
-    def _emit(self) -> None:
-        if self.on_epoch:
-            self.on_epoch({"finished": dict(self.finished), "history": dict(self.history), "partial": dict(self.partial)})
-
-    def save(self, member: int, checkpoint: dict) -> None:
-        self.partial[member] = checkpoint
-        self._emit()
-
-    def finish(self, member: int, net_state: dict, history: list[float]) -> None:
-        self.finished[member], self.history[member] = net_state, history
-        self.partial.pop(member, None)
-        self._emit()
-
-
-def _dumps(obj) -> bytes:
-    """Tensors cross the process boundary as bytes: torch's own pickling of tensors through a
-    multiprocessing queue shares memory with the sender, which may have exited by then."""
-    buffer = io.BytesIO()
-    torch.save(obj, buffer)
-    return buffer.getvalue()
-
-
-def _loads(data: bytes):
-    return torch.load(io.BytesIO(data), weights_only=False)
-
-
-def _train_forked(members: list[int], train_member: Callable, workers: int,
-                  report: Callable[[int, int, int], None], ckpt: _Checkpoint) -> None:
-    """Train `members` in up to `workers` forked processes (one CPU thread each); their
-    progress, checkpoints and results come back through one queue and are handled here, in the
-    parent, in the order they arrive. A worker that fails stops the others and raises."""
-    torch.optim.Adam([torch.zeros(1, requires_grad=True)])  # the first optimizer imports torch._dynamo (seconds): once, here
-    ctx = multiprocessing.get_context("fork")
-    queue = ctx.Queue()
-
-    def work(member: int) -> None:
-        torch.set_num_threads(1)
-        try:
-            result = train_member(member, lambda n, of: queue.put(("progress", member, (n, of))),
-                                  lambda c: queue.put(("checkpoint", member, _dumps(c))))
-            queue.put(("done", member, _dumps(result)))
-        except BaseException as e:  # noqa: BLE001 - reported to the parent, which raises
-            queue.put(("error", member, f"{type(e).__name__}: {e}"))
-
-    pending, running = list(members), {}
-    try:
-        while pending or running:
-            while pending and len(running) < workers:
-                member = pending.pop(0)
-                running[member] = ctx.Process(target=work, args=(member,), daemon=True)
-                running[member].start()
-            try:
-                kind, member, payload = queue.get(timeout=1.0)
-            except Empty:
-                dead = [m for m, p in running.items() if p.exitcode not in (None, 0)]
-                if dead:
-                    raise RuntimeError(f"training ensemble member {dead[0]} died (exit code {running[dead[0]].exitcode})")
-                continue
-            if kind == "progress":
-                report(member, *payload)
-            elif kind == "checkpoint":
-                ckpt.save(member, _loads(payload))
-            elif kind == "done":
-                ckpt.finish(member, *_loads(payload))
-                running.pop(member).join()
-            else:
-                raise RuntimeError(f"training ensemble member {member} failed: {payload}")
-    finally:
-        for process in running.values():
-            process.terminate()
 
 
 def _fit_member(model: "TrainedTranslator", net: Translator, encoded: list[Encoded], golds: list, n_names: int, seed: int,

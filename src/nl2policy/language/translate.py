@@ -9,7 +9,6 @@ so no caller mistakes it for a confident answer.
 from __future__ import annotations
 
 import math
-import os
 import sys
 import threading
 from collections import Counter
@@ -23,6 +22,7 @@ import torch
 from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.dataset import member_pairs
+from nl2policy.language.members import default_workers, is_current
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS, ModelConfig
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.text import WordVocab, tokenize
@@ -87,7 +87,7 @@ def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
     ckpt = path.with_suffix(".ckpt")
     path.parent.mkdir(parents=True, exist_ok=True)
     state = torch.load(ckpt, weights_only=False) if ckpt.is_file() else None
-    if state is not None and "partial" not in state:
+    if state is not None and not is_current(state):
         print(f"ignoring {ckpt}: a checkpoint of an older version; training afresh", file=sys.stderr)
         state = None
     specs = load_corpus(domain)
@@ -100,7 +100,7 @@ def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
         tmp.replace(ckpt)
 
     model = fit(domain, name, cfg, pairs, seed, progress=progress, vocab_texts=vocab_texts, state=state, on_epoch=save_checkpoint,
-                workers=workers or min(len(os.sched_getaffinity(0)), cfg.ensemble))
+                workers=workers or default_workers(cfg))
     tmp = path.with_suffix(".tmp")
     torch.save({"domain": domain, "name": name, "cfg": cfg.to_dict(), "words": model.words.itos[2:],
                 "nets": [net.state_dict() for net in model.nets], "lexicon": topic_lexicon(domain)}, tmp)
