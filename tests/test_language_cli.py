@@ -96,3 +96,16 @@ def test_off_topic_and_other_domain_get_low_confidence_and_a_warning(home):
         grid = to_grid(own.tree)
         assert set(own.node_confidence) == {i for i, x in enumerate(grid) if x is not None}
         assert all(0.0 <= p <= 1.0 for p in own.node_confidence.values())
+
+
+def test_a_tree_that_never_takes_a_named_action_is_flagged(home, monkeypatch):
+    """The warning names each action the text names and the tree never takes (mentions.py)."""
+    vocab = get_domain("taxi").vocab
+    habit = parse_tree({"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_village"}}, vocab)
+    loaded = tr.get_model("taxi", "smoke")
+    monkeypatch.setattr(loaded.translator, "predict", lambda texts: [(habit, {0: 0.9, 1: 0.9, 2: 0.9})])
+    said = tr.translate("taxi", "With a passenger drive to the airport, otherwise drive to the city.", "smoke")
+    assert said.tree == habit and [w for w in said.warnings if "never does" in w] == [
+        "the description says to drive to the city (go_city), but the tree never does: check where it should"]
+    plain = tr.translate("taxi", "With a passenger drive to the airport, otherwise drive to the village.", "smoke")
+    assert plain.warnings == []

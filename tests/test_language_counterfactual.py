@@ -7,7 +7,8 @@ import pytest
 from nl2policy.domains import get_domain
 from nl2policy.language.augment import augment_fold
 from nl2policy.language.corpus import load_corpus
-from nl2policy.language.counterfactual import GROUPS, _mentions, swap_actions
+from nl2policy.language.counterfactual import swap_actions
+from nl2policy.language.mentions import GROUPS, find_mentions
 from nl2policy.trees import Leaf, Node
 from nl2policy.trees.parse import validate
 from nl2policy.trees.tree import iter_leaves
@@ -65,7 +66,7 @@ def test_every_corpus_copy_is_valid_and_its_text_names_exactly_its_new_actions(d
         validate(tree, vocab)
         assert tree != spec.tree
         for group in GROUPS[domain]:
-            assert {a for *_, a in _mentions(group, text)} == {l.action for l in iter_leaves(tree)} & set(group.actions), spec.id
+            assert {a for *_, a in find_mentions(group, text)} == {l.action for l in iter_leaves(tree)} & set(group.actions), spec.id
     assert made >= len(load_corpus(domain)) // 2
 
 

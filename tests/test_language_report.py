@@ -100,7 +100,7 @@ def test_summary_sets_each_decoding_choice_beside_the_same_folds_without_it(tmp_
     assert "| taxi | g |" not in effects and "| taxi | m | cv, repeat 0 | 3 | no early-leaf cost" not in effects
 
 
-def test_fold_result_with_a_beam_and_a_leaf_cost_also_records_decoding_without_them(monkeypatch, one_torch_thread):
+def test_fold_result_with_a_beam_and_decoding_costs_also_records_decoding_without_them(monkeypatch, one_torch_thread):
     import dataclasses
 
     from nl2policy.language import evaluate
@@ -108,15 +108,20 @@ def test_fold_result_with_a_beam_and_a_leaf_cost_also_records_decoding_without_t
     from nl2policy.language.models.config import MODELS
     from nl2policy.language.models.pretrained import MiniLMCache
 
-    monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=2, beam=3, leaf_cost=100.0))
+    monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=2, beam=3, leaf_cost=100.0,
+                                                            mention_cost=100.0))
     specs = load_corpus("taxi")[:40]
     r = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
     assert 0 <= r["greedy_tree_acc"] <= 1 and "first_3_members_tree_acc" not in r  # one network: no smaller ensemble
-    # the same training without the cost (same seed, same networks) scores what the fold recorded as "without"
-    monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["tiny"], leaf_cost=0.0))
-    plain = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
-    assert plain["tree_acc"] == r["no_leaf_cost_tree_acc"] and "no_leaf_cost_tree_acc" not in plain
-    assert plain["token_acc"] != r["token_acc"]  # a prohibitive cost (full trees only) did change the trees
+    # the same training without one of the costs (same seed, same networks) scores what the fold
+    # recorded as "without" it
+    without = {}
+    for cost in ("leaf_cost", "mention_cost"):
+        monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["tiny"], **{cost: 0.0}))
+        without[cost] = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
+        assert without[cost]["tree_acc"] == r[f"no_{cost}_tree_acc"] and f"no_{cost}_tree_acc" not in without[cost]
+        monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["tiny"], **{cost: 100.0}))
+    assert without["leaf_cost"]["token_acc"] != r["token_acc"]  # a prohibitive leaf cost (full trees only) changed the trees
 
 
 def test_summary_sets_each_variant_of_the_default_beside_it_on_the_folds_both_ran(tmp_path, monkeypatch):

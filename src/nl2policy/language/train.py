@@ -19,6 +19,7 @@ import torch
 
 from nl2policy.domains import get_domain
 from nl2policy.language.grammar import allowed_tokens, next_slot
+from nl2policy.language.mentions import named_actions, unmet_mentions
 from nl2policy.language.members import MemberCheckpoints, train_forked
 from nl2policy.language.models.config import ModelConfig
 from nl2policy.language.models.network import Batch, StackedDecoder, Translator
@@ -53,6 +54,7 @@ class TrainedTranslator:
     history: list[float] = field(default_factory=list, repr=False)  # mean training loss per epoch
     beam: Optional[int] = None  # hypotheses kept while decoding (1 = greedy); None: the config's
     leaf_cost: Optional[float] = None  # decoding cost of an early leaf (see ModelConfig); None: the config's
+    mention_cost: Optional[float] = None  # decoding cost of a named action the tree lacks (see ModelConfig); None: the config's
     ensemble: Optional[int] = None  # decode with the first n networks only; None: all of them
     stack_members: bool = True  # flat encoders: decode all members as one batch (False: one by one, same result)
 
@@ -87,27 +89,31 @@ class TrainedTranslator:
         out = []
         decode = self._decode_paths if self.cfg.decoder == "path" else self._decode
         for i in range(0, len(texts), batch_size):
-            out += decode([self.encode(t) for t in texts[i:i + batch_size]])
+            chunk = list(texts[i:i + batch_size])
+            out += decode([self.encode(t) for t in chunk], chunk)
         return out
 
-    def _decode_paths(self, items: list[Encoded]) -> list[tuple[Tree, dict[int, float]]]:
+    def _decode_paths(self, items: list[Encoded], texts: list[str]) -> list[tuple[Tree, dict[int, float]]]:
         vocab = get_domain(self.domain).vocab
         memory = self.net.encode(collate(items))
         decoded = decode_paths(self.net.path, memory["words"], memory["mask"], self.tree_tokens, len(vocab.question_ids))
         return [(tree, dict(zip(_preorder_slots(tree), probs))) for tree, probs in decoded]
 
-    def _decode(self, items: list[Encoded]) -> list[tuple[Tree, dict[int, float]]]:
+    def _decode(self, items: list[Encoded], texts: list[str]) -> list[tuple[Tree, dict[int, float]]]:
         """Beam search under the grammar mask over the members' averaged step probabilities
         (`self.beam` hypotheses per description; 1 is greedy). A tree's score is the sum of its
         nodes' log-probabilities, so a subtree the text does not support costs its every node;
         an action placed where a question could still go also costs `leaf_cost` nats, which
         offsets that sum's pull towards small trees (the reported probabilities stay the
-        model's own)."""
+        model's own). With a `mention_cost`, the final choice among the beam's hypotheses also
+        pays that many nats for each action the text names (language/mentions.py) that the tree
+        never takes."""
         vocab = get_domain(self.domain).vocab
         names = self.tree_tokens
         index = {t: i for i, t in enumerate(names)}
         is_action = torch.tensor([t in vocab.actions for t in names])
         leaf_cost = self.cfg.leaf_cost if self.leaf_cost is None else self.leaf_cost
+        mention_cost = self.cfg.mention_cost if self.mention_cost is None else self.mention_cost
         B, K = len(items), max(1, self.beam or self.cfg.beam)
         state = DecoderState(self, collate(items), copies=K)
         prefixes: list[list[str]] = [[] for _ in range(B * K)]
@@ -148,8 +154,15 @@ class TrainedTranslator:
                     probs[r][slots[src].grid] = float(p[src, c])
             state.reorder(source)
             state.push(choice)
+        trees = [from_tokens(p, vocab) if p and next_slot(p, vocab) is None else None for p in prefixes]
+        if mention_cost:
+            for b, text in enumerate(texts):
+                named = named_actions(self.domain, text)
+                for k in range(K):
+                    if named and trees[b * K + k] is not None:
+                        score[b, k] -= mention_cost * len(unmet_mentions(self.domain, text, trees[b * K + k], named))
         top = score.argmax(-1)  # beams stay sorted, but finished ones may have been overtaken
-        return [(from_tokens(prefixes[b * K + int(k)], vocab), probs[b * K + int(k)]) for b, k in enumerate(top)]
+        return [(trees[b * K + int(k)], probs[b * K + int(k)]) for b, k in enumerate(top)]
 
 
 class DecoderState:

@@ -6,10 +6,12 @@ Seq2Tree+MiniLM = Seq2Tree whose word inputs are fused with frozen MiniLM layers
 all six layers for the MiniLM models: six read new writers better than three in our checks);
 HAN2Tree = hierarchical (word, sentence) attention encoder + tree decoder;
 seq2tree-minilm-synth = Seq2Tree+MiniLM trained with synthetic pairs as well;
-seq2tree-minilm-synth-x3 (the default) = an ensemble of three of those (decoding averages their steps, beam of 4);
-seq2tree-minilm-synth-x3-leafcost (experimental) = the same ensemble, whose beam also charges a
-branch that ends early (an action where a question could still go) 0.5 nats.
-seq2tree-minilm-synth-x3-swap (experimental) = the default trained with counterfactual augmented
+seq2tree-minilm-synth-x3 = an ensemble of three of those (decoding averages their steps, beam of 4);
+seq2tree-minilm-synth-x3-mentions (the default) = the same ensemble, whose final choice among the
+beam's trees also pays 1 nat per action the text names that the tree never takes (language/mentions.py);
+seq2tree-minilm-synth-x3-leafcost (experimental) = the x3 ensemble, whose beam also charges a
+branch that ends early (an action where a question could still go) 0.5 nats;
+seq2tree-minilm-synth-x3-swap (experimental) = x3 trained with counterfactual augmented
 copies (the actions a description names permuted in text and tree, language/counterfactual.py);
 seq2tree-minilm-synth-x6 (measured, not a default) = six members instead of three: twice the training time.
 Configurations live in `config.py`; the network in `network.py`.

@@ -1,0 +1,70 @@
+"""The actions a description names, and the decoder's mention check that uses them."""
+
+import dataclasses
+
+import pytest
+
+from nl2policy.domains import get_domain
+from nl2policy.language.corpus import load_corpus
+from nl2policy.language.mentions import named_actions, unmet_mentions
+from nl2policy.language.models.config import MODELS
+from nl2policy.language.train import fit
+from nl2policy.trees import parse_tree
+from test_language_train import _assert_teacher_forced
+
+
+@pytest.mark.parametrize("text, actions", [
+    ("Got a passenger: go to the airport. Not in the village? Drive to the city.", {"go_airport", "go_city"}),
+    ("if traffic heavy -> village\nelse -> city", {"go_village", "go_city"}),
+    ("wait in the city for a passenger", set()),  # the city is where it waits, not where it drives
+    ("I'm the taxi, I like the village bakery.", set()),
+])
+def test_taxi_mentions(text, actions):
+    assert named_actions("taxi", text) == actions
+
+
+def test_highway_mentions_and_a_domain_without_patterns():
+    assert named_actions("highway", "If blocked, move to the left lane; otherwise speed up.") == {"lane_left", "faster"}
+    assert named_actions("highway", "Brake when a car is close ahead.") == {"slower"}
+    assert named_actions("nowhere", "drive to the city") == set()
+
+
+def test_unmet_mentions_are_the_named_actions_the_tree_never_takes():
+    tree = parse_tree({"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_village"}}, get_domain("taxi").vocab)
+    text = "With a passenger, drive to the airport; without one, drive to the city."
+    assert unmet_mentions("taxi", text, tree) == {"go_city"}
+    assert unmet_mentions("taxi", "drive to the airport", tree) == set()
+
+
+@pytest.mark.parametrize("domain, most", [("taxi", 1), ("highway", 3)])
+def test_writers_trees_almost_always_take_every_action_their_text_names(domain, most):
+    """The precision the mention check rests on (mentions.py's docstring): an action the patterns
+    find is missing from the writer's own tree in at most 1 taxi and 3 highway descriptions of 200,
+    while the patterns find something in nearly every description."""
+    specs = load_corpus(domain)
+    assert sum(bool(named_actions(domain, s.description)) for s in specs) >= 190
+    assert sum(bool(unmet_mentions(domain, s.description, s.tree)) for s in specs) <= most
+
+
+def test_mention_check_never_leaves_more_named_actions_out_and_keeps_the_probabilities(one_torch_thread):
+    """The check only changes which of the beam's final hypotheses is kept: with a prohibitive cost,
+    no text ends with more unmet mentions than plain decoding leaves, some end with fewer (a small
+    model ignores the text often enough), the node probabilities of a changed choice are that
+    tree's own (teacher-forced), and
+    the config's setting (none) gives plain decoding back."""
+    specs = load_corpus("taxi")
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=2, batch=16, beam=4)
+    model = fit("taxi", "one", cfg, [(s.description, s.tree) for s in specs[:40]], seed=0)
+    texts = [s.description for s in specs[40:80]]
+    unmet = lambda decoded: [len(unmet_mentions("taxi", x, t)) for x, (t, _) in zip(texts, decoded)]
+    plain = model.predict(texts)
+    model.mention_cost = 100.0
+    checked = model.predict(texts)
+    assert all(c <= p for c, p in zip(unmet(checked), unmet(plain)))
+    assert sum(unmet(checked)) < sum(unmet(plain))
+    changed = [(x, c) for x, c, p in zip(texts, checked, plain) if c[0] != p[0]]
+    assert changed
+    for text, (tree, probs) in changed:
+        _assert_teacher_forced(model, text, tree, probs)
+    model.mention_cost = None
+    assert model.predict(texts) == plain
