@@ -1,8 +1,8 @@
-"""Turning (description, tree) pairs into tensors, the training loop, and constrained decoding.
+"""Turning (description, tree) pairs into tensors, the training loop, and the trained translator.
 
 `fit` is the whole training loop in plain view (Adam, teacher forcing, a few epochs), run
 once per member of a small ensemble (members.py: their checkpoints, and worker processes to
-train them side by side); `TrainedTranslator.predict` runs a beam search (greedy
+train them side by side); `TrainedTranslator.predict` runs a beam search (decoding.py; greedy
 with a beam of one) under the grammar mask with the members' probabilities averaged, so every
 output is a valid tree, and returns each node's probability for the confidence score.
 """
@@ -14,21 +14,19 @@ import random
 from dataclasses import dataclass, field
 from typing import Callable, Optional, Sequence, Union
 
-import numpy as np
 import torch
 
 from nl2policy.domains import get_domain
 from nl2policy.language.grammar import allowed_tokens, next_slot
-from nl2policy.language.mentions import named_actions, unmet_mentions
+from nl2policy.language.decoding import beam_search, preorder_slots
 from nl2policy.language.members import MemberCheckpoints, train_forked
 from nl2policy.language.models.config import ModelConfig
-from nl2policy.language.models.network import Batch, StackedDecoder, Translator
+from nl2policy.language.models.network import Batch, Translator
 from nl2policy.language.models.pathnet import decode_paths, tree_nodes
 from nl2policy.language.models.pretrained import DIM as MINILM_DIM, MiniLMCache
 from nl2policy.language.text import WordVocab, split_sentences
-from nl2policy.trees import Tree, from_tokens, to_tokens
+from nl2policy.trees import Tree, to_tokens
 
-MAX_STEPS = 15
 MAX_SENT_WORDS = 60
 Pairs = Union[Sequence[tuple[str, Tree]], Callable[[int], Sequence[tuple[str, Tree]]]]
 """Training pairs: one list for every ensemble member, or member index -> that member's list."""
@@ -97,130 +95,10 @@ class TrainedTranslator:
         vocab = get_domain(self.domain).vocab
         memory = self.net.encode(collate(items))
         decoded = decode_paths(self.net.path, memory["words"], memory["mask"], self.tree_tokens, len(vocab.question_ids))
-        return [(tree, dict(zip(_preorder_slots(tree), probs))) for tree, probs in decoded]
+        return [(tree, dict(zip(preorder_slots(tree), probs))) for tree, probs in decoded]
 
     def _decode(self, items: list[Encoded], texts: list[str]) -> list[tuple[Tree, dict[int, float]]]:
-        """Beam search under the grammar mask over the members' averaged step probabilities
-        (`self.beam` hypotheses per description; 1 is greedy). A tree's score is the sum of its
-        nodes' log-probabilities, so a subtree the text does not support costs its every node;
-        an action placed where a question could still go also costs `leaf_cost` nats, which
-        offsets that sum's pull towards small trees (the reported probabilities stay the
-        model's own). With a `mention_cost`, the final choice among the beam's hypotheses also
-        pays that many nats for each action the text names (language/mentions.py) that the tree
-        never takes."""
-        vocab = get_domain(self.domain).vocab
-        names = self.tree_tokens
-        index = {t: i for i, t in enumerate(names)}
-        is_action = torch.tensor([t in vocab.actions for t in names])
-        leaf_cost = self.cfg.leaf_cost if self.leaf_cost is None else self.leaf_cost
-        mention_cost = self.cfg.mention_cost if self.mention_cost is None else self.mention_cost
-        B, K = len(items), max(1, self.beam or self.cfg.beam)
-        state = DecoderState(self, collate(items), copies=K)
-        prefixes: list[list[str]] = [[] for _ in range(B * K)]
-        probs: list[dict[int, float]] = [{} for _ in range(B * K)]
-        score = torch.full((B, K), -math.inf)
-        score[:, 0] = 0.0  # the copies start identical: only the first may expand
-        for _ in range(MAX_STEPS):
-            slots = [next_slot(p, vocab) for p in prefixes]
-            if all(s is None for s in slots):
-                break
-            mask = torch.zeros(B * K, len(names), dtype=torch.bool)
-            parent = torch.full((B * K,), -1, dtype=torch.long)
-            branch = torch.zeros(B * K, dtype=torch.long)
-            for r, s in enumerate(slots):
-                if s is None:
-                    mask[r, 0] = True  # finished: one placeholder continuation at no cost
-                    continue
-                mask[r, [index[a] for a in allowed_tokens(s, vocab)]] = True
-                parent[r], branch[r] = s.parent, s.branch
-            logits = state.step(parent, branch)  # (members, B*K, tokens)
-            p = torch.softmax(logits.masked_fill(~mask, -1e9), -1).mean(0)
-            done = torch.tensor([s is None for s in slots])
-            logp = torch.where(mask, p.clamp(min=1e-12).log(), torch.tensor(-math.inf))
-            if leaf_cost:
-                early = (mask & ~is_action).any(-1, keepdim=True)  # a question was allowed here
-                logp = logp - leaf_cost * (early & is_action)
-            logp[done] = torch.where(mask[done], 0.0, -math.inf)
-            total = (score.view(B * K, 1) + logp).view(B, K * len(names))
-            best, flat = total.topk(K, -1)  # ties keep the lower index: greedy's argmax when K = 1
-            source = (torch.arange(B)[:, None] * K + flat // len(names)).view(-1)
-            choice = (flat % len(names)).view(-1)
-            score = best
-            prefixes = [list(prefixes[r]) for r in source.tolist()]
-            probs = [dict(probs[r]) for r in source.tolist()]
-            for r, (src, c) in enumerate(zip(source.tolist(), choice.tolist())):
-                if slots[src] is not None:
-                    prefixes[r].append(names[c])
-                    probs[r][slots[src].grid] = float(p[src, c])
-            state.reorder(source)
-            state.push(choice)
-        trees = [from_tokens(p, vocab) if p and next_slot(p, vocab) is None else None for p in prefixes]
-        if mention_cost:
-            for b, text in enumerate(texts):
-                named = named_actions(self.domain, text)
-                for k in range(K):
-                    if named and trees[b * K + k] is not None:
-                        score[b, k] -= mention_cost * len(unmet_mentions(self.domain, text, trees[b * K + k], named))
-        top = score.argmax(-1)  # beams stay sorted, but finished ones may have been overtaken
-        return [(trees[b * K + int(k)], probs[b * K + int(k)]) for b, k in enumerate(top)]
-
-
-class DecoderState:
-    """Every member's running decoder over a batch of hypotheses: the state after each step
-    (a node's children are fed its state), the tokens chosen, the last attention context.
-
-    Kept as tensors with a step axis, so the beam search reorders hypotheses with one index per
-    tensor. Flat encoders run all members at once (StackedDecoder); the hierarchical one (or
-    any, with `stack_members` off), member by member: same arithmetic."""
-
-    def __init__(self, model: TrainedTranslator, batch: Batch, copies: int = 1) -> None:
-        """`copies` hypotheses per description (rows b*copies ... b*copies+copies-1): each
-        description is encoded once, then its memory repeated."""
-        self.nets = model.nets[:model.ensemble] if model.ensemble else model.nets
-        self.memories = [{k: v.repeat_interleave(copies, 0) for k, v in net.encode(batch).items()} for net in self.nets]
-        h0 = torch.stack([m["h0"] for m in self.memories])  # (E, B, h)
-        E, B, h = h0.shape
-        self.states = h0.new_zeros(E, B, MAX_STEPS + 1, h)
-        self.states[:, :, 0] = h0
-        self.tokens = torch.full((B, MAX_STEPS + 1), self.nets[0].start_id, dtype=torch.long)
-        self.ctx = h0.new_zeros(E, B, self.nets[0].out.in_features - h)
-        self.t = 0
-        self.stacked = None
-        if model.cfg.encoder == "flat" and model.stack_members:
-            self.stacked = StackedDecoder(self.nets)
-            self.words = torch.stack([m["words"] for m in self.memories])
-
-    def step(self, parent: torch.Tensor, branch: torch.Tensor) -> torch.Tensor:
-        """Every member's logits (E, B, V) for the next slot, whose parent is at token position
-        `parent` (-1: the root, fed the start state)."""
-        rows, src = torch.arange(len(parent)), parent + 1
-        h_prev, prev_tok = self.states[:, :, self.t], self.tokens[:, self.t]
-        h_parent, parent_tok = self.states[:, rows, src], self.tokens[rows, src]
-        if self.stacked is not None:
-            h, ctx, logits = self.stacked.step(self.words, self.memories[0]["mask"], h_prev, self.ctx, prev_tok,
-                                               h_parent, parent_tok, branch)
-        else:
-            out = [net.step(m, h_prev[e], self.ctx[e], prev_tok, h_parent[e], parent_tok, branch)
-                   for e, (net, m) in enumerate(zip(self.nets, self.memories))]
-            h, ctx, logits = (torch.stack(x) for x in zip(*out))
-        self.states[:, :, self.t + 1] = h
-        self.ctx = ctx
-        return logits
-
-    def reorder(self, source: torch.Tensor) -> None:
-        """Hypothesis i continues hypothesis source[i] (of the same description)."""
-        self.states, self.tokens, self.ctx = self.states[:, source], self.tokens[source], self.ctx[:, source]
-
-    def push(self, chosen: torch.Tensor) -> None:
-        self.t += 1
-        self.tokens[:, self.t] = chosen
-
-
-def _preorder_slots(tree: Tree, slot: int = 0) -> list[int]:
-    """Grid slots of a tree's nodes in pre-order."""
-    if not hasattr(tree, "question"):
-        return [slot]
-    return [slot] + _preorder_slots(tree.yes, 2 * slot + 1) + _preorder_slots(tree.no, 2 * slot + 2)
+        return beam_search(self, collate(items), texts)
 
 
 def path_loss(net: Translator, batch: Batch, nodes: list[list[tuple[tuple, int]]], n_labels: int) -> torch.Tensor:

@@ -1,0 +1,149 @@
+"""Grammar-constrained decoding of a trained translator: the beam search over the ensemble's
+averaged step probabilities, the running decoder state it reorders, and the final choice among
+its hypotheses (with the optional action-mention check).
+
+Every step is masked by the grammar (grammar.py), so every output is a valid tree of the domain;
+each node's probability comes back with the tree, for the confidence score.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import torch
+
+from nl2policy.domains import get_domain
+from nl2policy.language.grammar import allowed_tokens, next_slot
+from nl2policy.language.mentions import named_actions, unmet_mentions
+from nl2policy.language.models.network import Batch, StackedDecoder
+from nl2policy.trees import Tree, from_tokens
+
+if TYPE_CHECKING:
+    from nl2policy.language.train import TrainedTranslator
+
+MAX_STEPS = 15
+
+
+def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> list[tuple[Tree, dict[int, float]]]:
+    """Beam search under the grammar mask over the members' averaged step probabilities
+    (`model.beam` hypotheses per description; 1 is greedy). A tree's score is the sum of its
+    nodes' log-probabilities, so a subtree the text does not support costs its every node;
+    an action placed where a question could still go also costs `leaf_cost` nats, which
+    offsets that sum's pull towards small trees (the reported probabilities stay the
+    model's own). With a `mention_cost`, the final choice among the beam's hypotheses also
+    pays that many nats for each action the text names (language/mentions.py) that the tree
+    never takes."""
+    vocab = get_domain(model.domain).vocab
+    names = model.tree_tokens
+    index = {t: i for i, t in enumerate(names)}
+    is_action = torch.tensor([t in vocab.actions for t in names])
+    leaf_cost = model.cfg.leaf_cost if model.leaf_cost is None else model.leaf_cost
+    mention_cost = model.cfg.mention_cost if model.mention_cost is None else model.mention_cost
+    B, K = len(texts), max(1, model.beam or model.cfg.beam)
+    state = DecoderState(model, batch, copies=K)
+    prefixes: list[list[str]] = [[] for _ in range(B * K)]
+    probs: list[dict[int, float]] = [{} for _ in range(B * K)]
+    score = torch.full((B, K), -math.inf)
+    score[:, 0] = 0.0  # the copies start identical: only the first may expand
+    for _ in range(MAX_STEPS):
+        slots = [next_slot(p, vocab) for p in prefixes]
+        if all(s is None for s in slots):
+            break
+        mask = torch.zeros(B * K, len(names), dtype=torch.bool)
+        parent = torch.full((B * K,), -1, dtype=torch.long)
+        branch = torch.zeros(B * K, dtype=torch.long)
+        for r, s in enumerate(slots):
+            if s is None:
+                mask[r, 0] = True  # finished: one placeholder continuation at no cost
+                continue
+            mask[r, [index[a] for a in allowed_tokens(s, vocab)]] = True
+            parent[r], branch[r] = s.parent, s.branch
+        logits = state.step(parent, branch)  # (members, B*K, tokens)
+        p = torch.softmax(logits.masked_fill(~mask, -1e9), -1).mean(0)
+        done = torch.tensor([s is None for s in slots])
+        logp = torch.where(mask, p.clamp(min=1e-12).log(), torch.tensor(-math.inf))
+        if leaf_cost:
+            early = (mask & ~is_action).any(-1, keepdim=True)  # a question was allowed here
+            logp = logp - leaf_cost * (early & is_action)
+        logp[done] = torch.where(mask[done], 0.0, -math.inf)
+        total = (score.view(B * K, 1) + logp).view(B, K * len(names))
+        best, flat = total.topk(K, -1)  # ties keep the lower index: greedy's argmax when K = 1
+        source = (torch.arange(B)[:, None] * K + flat // len(names)).view(-1)
+        choice = (flat % len(names)).view(-1)
+        score = best
+        prefixes = [list(prefixes[r]) for r in source.tolist()]
+        probs = [dict(probs[r]) for r in source.tolist()]
+        for r, (src, c) in enumerate(zip(source.tolist(), choice.tolist())):
+            if slots[src] is not None:
+                prefixes[r].append(names[c])
+                probs[r][slots[src].grid] = float(p[src, c])
+        state.reorder(source)
+        state.push(choice)
+    trees = [from_tokens(p, vocab) if p and next_slot(p, vocab) is None else None for p in prefixes]
+    if mention_cost:
+        for b, text in enumerate(texts):
+            named = named_actions(model.domain, text)
+            for k in range(K):
+                if named and trees[b * K + k] is not None:
+                    score[b, k] -= mention_cost * len(unmet_mentions(model.domain, text, trees[b * K + k], named))
+    top = score.argmax(-1)  # beams stay sorted, but finished ones may have been overtaken
+    return [(trees[b * K + int(k)], probs[b * K + int(k)]) for b, k in enumerate(top)]
+
+
+class DecoderState:
+    """Every member's running decoder over a batch of hypotheses: the state after each step
+    (a node's children are fed its state), the tokens chosen, the last attention context.
+
+    Kept as tensors with a step axis, so the beam search reorders hypotheses with one index per
+    tensor. Flat encoders run all members at once (StackedDecoder); the hierarchical one (or
+    any, with `stack_members` off), member by member: same arithmetic."""
+
+    def __init__(self, model: TrainedTranslator, batch: Batch, copies: int = 1) -> None:
+        """`copies` hypotheses per description (rows b*copies ... b*copies+copies-1): each
+        description is encoded once, then its memory repeated."""
+        self.nets = model.nets[:model.ensemble] if model.ensemble else model.nets
+        self.memories = [{k: v.repeat_interleave(copies, 0) for k, v in net.encode(batch).items()} for net in self.nets]
+        h0 = torch.stack([m["h0"] for m in self.memories])  # (E, B, h)
+        E, B, h = h0.shape
+        self.states = h0.new_zeros(E, B, MAX_STEPS + 1, h)
+        self.states[:, :, 0] = h0
+        self.tokens = torch.full((B, MAX_STEPS + 1), self.nets[0].start_id, dtype=torch.long)
+        self.ctx = h0.new_zeros(E, B, self.nets[0].out.in_features - h)
+        self.t = 0
+        self.stacked = None
+        if model.cfg.encoder == "flat" and model.stack_members:
+            self.stacked = StackedDecoder(self.nets)
+            self.words = torch.stack([m["words"] for m in self.memories])
+
+    def step(self, parent: torch.Tensor, branch: torch.Tensor) -> torch.Tensor:
+        """Every member's logits (E, B, V) for the next slot, whose parent is at token position
+        `parent` (-1: the root, fed the start state)."""
+        rows, src = torch.arange(len(parent)), parent + 1
+        h_prev, prev_tok = self.states[:, :, self.t], self.tokens[:, self.t]
+        h_parent, parent_tok = self.states[:, rows, src], self.tokens[rows, src]
+        if self.stacked is not None:
+            h, ctx, logits = self.stacked.step(self.words, self.memories[0]["mask"], h_prev, self.ctx, prev_tok,
+                                               h_parent, parent_tok, branch)
+        else:
+            out = [net.step(m, h_prev[e], self.ctx[e], prev_tok, h_parent[e], parent_tok, branch)
+                   for e, (net, m) in enumerate(zip(self.nets, self.memories))]
+            h, ctx, logits = (torch.stack(x) for x in zip(*out))
+        self.states[:, :, self.t + 1] = h
+        self.ctx = ctx
+        return logits
+
+    def reorder(self, source: torch.Tensor) -> None:
+        """Hypothesis i continues hypothesis source[i] (of the same description)."""
+        self.states, self.tokens, self.ctx = self.states[:, source], self.tokens[source], self.ctx[:, source]
+
+    def push(self, chosen: torch.Tensor) -> None:
+        self.t += 1
+        self.tokens[:, self.t] = chosen
+
+
+def preorder_slots(tree: Tree, slot: int = 0) -> list[int]:
+    """Grid slots of a tree's nodes in pre-order."""
+    if not hasattr(tree, "question"):
+        return [slot]
+    return [slot] + preorder_slots(tree.yes, 2 * slot + 1) + preorder_slots(tree.no, 2 * slot + 2)
