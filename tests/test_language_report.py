@@ -36,20 +36,33 @@ def test_summary_reports_mean_std_per_writer_pair_and_unfinished_rows(tmp_path):
 def test_experiment_never_runs_a_fold_twice(tmp_path, monkeypatch):
     from nl2policy.language import evaluate
 
-    calls = []
+    calls, workers = [], set()
 
-    def fake_fold(domain, specs, train_idx, test_idx, name, seed, cache):
+    def fake_fold(domain, specs, train_idx, test_idx, name, seed, cache, n_workers):
         calls.append((domain, name, tuple(test_idx)))
+        workers.add(n_workers)
         return {"n": len(test_idx), "valid": len(test_idx), "tree_acc": 0.5, "token_acc": 0.5, "policy_acc": 0.5,
                 "train_pairs": len(train_idx), "seconds": 0.0}
 
     monkeypatch.setattr(evaluate, "run_fold", fake_fold)
     plan = [("taxi", "m", "cv", 1), ("taxi", "m", "cv", 2)]  # cv2 holds cv1's folds: only 5 new ones
-    evaluate.run_experiment(plan, tmp_path)
+    evaluate.run_experiment(plan, tmp_path, workers=2)
     assert len(calls) == 10 == len(set(calls))
+    assert workers == {2}  # each fold's training gets the worker processes asked for
     evaluate.run_experiment(plan, tmp_path)  # resuming a finished experiment runs nothing
     assert len(calls) == 10
     assert len((tmp_path / "runs.jsonl").read_text().splitlines()) == 10
+
+
+def test_summary_sets_the_best_fully_cross_validated_model_beside_the_paper(tmp_path):
+    runs = [_run("taxi", "a", f"cv-r{r}-f{f}", "cv", 0.9) for r in range(3) for f in range(5)]
+    runs += [_run("taxi", "b", f"cv-r{r}-f{f}", "cv", 0.8) for r in range(3) for f in range(5)]
+    runs += [_run("taxi", "c", "cv-r0-f0", "cv", 1.0)]  # better, but one fold: not the paper's protocol
+    runs += [_run("taxi", "a", "writers-f0", "writers", 0.7), _run("highway", "b", "cv-r0-f0", "cv", 0.9)]
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
+    md = summarize(tmp_path, "cmd", "budget").read_text()
+    assert "| taxi | a | 90.00 (0.00) | 70.00 (1 of 4 folds) | 86.30 | yes |" in md
+    assert "| highway |" not in md.split("## Best model against the paper")[1].split("##")[0]  # no full CV there
 
 
 def test_summary_counts_a_fold_recorded_twice_once(tmp_path):
