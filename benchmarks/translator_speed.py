@@ -35,6 +35,7 @@ def main() -> None:
 
     torch.set_num_threads(args.threads)
     from nl2policy.language.corpus import load_corpus
+    from nl2policy.language.evaluate import machine
     from nl2policy.language.dataset import training_pairs
     from nl2policy.language.members import default_workers
     from nl2policy.language.models.pretrained import encode_tokens
@@ -103,7 +104,7 @@ def main() -> None:
     lines = [f"command: .venv/bin/python benchmarks/translator_speed.py --domain {args.domain} --threads {args.threads} "
              f"--latency-threads {args.latency_threads}" + (" --no-compare" if args.no_compare else ""),
              f"model {name}, domain {args.domain}, {args.threads} torch threads training, {args.latency_threads} translating, "
-             f"{os.cpu_count()} cores, "
+             f"{os.cpu_count()} cores ({machine()}), "
              f"load average (1 min) at start {load_start:.1f}, at end {os.getloadavg()[0]:.1f}",
              f"training time: {train_s:.1f} s (budget 300 s) -> {'OK' if train_s < 300 else 'OVER'}; "
              f"{workers} worker processes of 1 torch thread (weights bit-identical to the shipped model's: {same_as_shipped})"

@@ -51,7 +51,9 @@ def test_experiment_never_runs_a_fold_twice(tmp_path, monkeypatch):
     assert workers == {2}  # each fold's training gets the worker processes asked for
     evaluate.run_experiment(plan, tmp_path)  # resuming a finished experiment runs nothing
     assert len(calls) == 10
-    assert len((tmp_path / "runs.jsonl").read_text().splitlines()) == 10
+    records = [json.loads(line) for line in (tmp_path / "runs.jsonl").read_text().splitlines()]
+    assert len(records) == 10
+    assert all(r["machine"] == evaluate.machine() != "" for r in records)  # where each fold trained
 
 
 def test_summary_sets_the_best_fully_cross_validated_model_beside_the_paper(tmp_path):

@@ -9,6 +9,7 @@ stopped; `summarize` turns the runs into the Markdown/JSON tables and the figure
 from __future__ import annotations
 
 import json
+import platform
 import time
 from pathlib import Path
 from statistics import mean, pstdev
@@ -88,6 +89,20 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     return result
 
 
+def machine() -> str:
+    """The kind of CPU a fold trained on, recorded with it. A fold retrains bit for bit on the
+    same kind of CPU, not across kinds: the float kernels PyTorch picks depend on the
+    instruction set (AVX-512 or not), and 30 epochs turn a last-bit difference into other
+    networks, a few trees apart on a 40-description fold."""
+    try:
+        info = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return platform.processor() or platform.machine()
+    model = next((line.split(":", 1)[1].strip() for line in info.splitlines() if line.startswith("model name")), "")
+    flags = next((line.split(":", 1)[1].split() for line in info.splitlines() if line.startswith("flags")), [])
+    return f"{model or platform.machine()}, {'avx512' if 'avx512f' in flags else 'no avx512'}"
+
+
 def plan_folds(specs: Sequence[Spec], protocol: str, repeats: int) -> list[tuple[str, list[int], list[int]]]:
     """(fold key, train, test). "cv": 5 folds x `repeats` (fold seed = repeat); "writers":
     4 folds of 2 held-out writers each."""
@@ -116,7 +131,7 @@ def run_experiment(plan: Sequence[tuple[str, str, str, int]], out: Path,
                 progress(f"{domain} {name} {key}")
             seed = int(key.split("-r")[1][0]) if "-r" in key else 0
             result = run_fold(domain, specs, tr, te, name, seed, cache, workers)
-            result.update(domain=domain, model=name, fold=key, protocol=protocol)
+            result.update(domain=domain, model=name, fold=key, protocol=protocol, machine=machine())
             with runs.open("a") as fh:
                 fh.write(json.dumps(result) + "\n")
             done.add((domain, name, key))  # a later plan step (e.g. cv3 after cv1) must not redo it
