@@ -14,7 +14,9 @@ average (printed) says how busy the machine was.
 from __future__ import annotations
 
 import argparse
+import atexit
 import os
+import shutil
 import statistics
 import tempfile
 import time
@@ -30,7 +32,9 @@ def main() -> None:
     parser.add_argument("--model", default=None)
     parser.add_argument("--no-compare", action="store_true", help="Skip training the members one by one for comparison")
     args = parser.parse_args()
-    os.environ["NL2POLICY_HOME"] = tempfile.mkdtemp(prefix="nl2policy-bench-")
+    scratch = tempfile.mkdtemp(prefix="nl2policy-bench-")  # both trainings' files; removed at exit
+    atexit.register(shutil.rmtree, scratch, ignore_errors=True)
+    os.environ["NL2POLICY_HOME"] = os.path.join(scratch, "home")
     import torch
 
     torch.set_num_threads(args.threads)
@@ -65,7 +69,7 @@ def main() -> None:
     one_by_one_s = None
     if not args.no_compare:
         start = time.perf_counter()
-        train_default(args.domain, name, out=Path(tempfile.mkdtemp(prefix="nl2policy-bench-")), workers=1)
+        train_default(args.domain, name, out=Path(scratch) / "one-by-one", workers=1)
         one_by_one_s = time.perf_counter() - start
     torch.set_num_threads(args.latency_threads)
     get_model(args.domain, name)

@@ -1,4 +1,6 @@
+import atexit
 import os
+import shutil
 import tempfile
 
 import pytest
@@ -6,6 +8,7 @@ import pytest
 os.environ.setdefault("MPLBACKEND", "Agg")
 # Tests never touch the user's data directory: models, databases and runs go to a fresh folder.
 os.environ["NL2POLICY_HOME"] = tempfile.mkdtemp(prefix="nl2policy-test-")
+atexit.register(shutil.rmtree, os.environ["NL2POLICY_HOME"], ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

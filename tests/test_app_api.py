@@ -8,7 +8,6 @@ exercised in the translation tests and in the browser test.
 import json
 import threading
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import pytest
 from fastapi.testclient import TestClient
@@ -16,7 +15,7 @@ from typer.testing import CliRunner
 
 from nl2policy.app.server import create_app
 from nl2policy.language.corpus import load_corpus
-from nl2policy.trees import to_grid, tree_to_json
+from nl2policy.trees import to_grid
 
 
 @dataclass

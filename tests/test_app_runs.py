@@ -2,7 +2,6 @@
 
 import time
 
-import pytest
 from fastapi.testclient import TestClient
 
 from nl2policy.app.server import create_app

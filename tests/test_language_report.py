@@ -2,7 +2,8 @@
 
 import json
 
-from nl2policy.language.evaluate import held_out_writers, summarize
+from nl2policy.language.evaluate import held_out_writers
+from nl2policy.language.summary import summarize
 
 
 def _run(domain, model, fold, protocol, tree_acc):
@@ -54,6 +55,21 @@ def test_experiment_never_runs_a_fold_twice(tmp_path, monkeypatch):
     records = [json.loads(line) for line in (tmp_path / "runs.jsonl").read_text().splitlines()]
     assert len(records) == 10
     assert all(r["machine"] == evaluate.machine() != "" for r in records)  # where each fold trained
+    assert all(r["workers"] == 2 for r in records)  # and how (its seconds depend on it)
+
+
+def test_summary_says_which_machine_ran_each_row(tmp_path):
+    runs = [_run("taxi", "a", "cv-r0-f0", "cv", 0.5), _run("taxi", "a", "cv-r0-f1", "cv", 0.5),  # recorded no machine
+            dict(_run("taxi", "b", "cv-r0-f0", "cv", 0.5), machine="cpu x"),
+            dict(_run("taxi", "c", "cv-r0-f0", "cv", 0.5), machine="cpu x"), _run("taxi", "c", "cv-r0-f1", "cv", 0.5)]
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
+    md = summarize(tmp_path, "cmd", "budget").read_text()
+    assert "A = not recorded; B = cpu x." in md
+    assert "| taxi | a | cv | 2 | 50.00 (0.00) | 90.00 (0.00) | 50.00 (0.00) | yes | 10 | 1.0 | A |" in md
+    assert "| taxi | b | cv | 1 | 50.00 (0.00) | 90.00 (0.00) | 50.00 (0.00) | yes | 10 | 1.0 | B |" in md
+    assert "| taxi | c | cv | 2 | 50.00 (0.00) | 90.00 (0.00) | 50.00 (0.00) | yes | 10 | 1.0 | A 1, B 1 |" in md
+    rows = {r["model"]: r["machines"] for r in json.loads((tmp_path / "translation.json").read_text())["rows"]}
+    assert rows == {"a": {"not recorded": 2}, "b": {"cpu x": 1}, "c": {"not recorded": 1, "cpu x": 1}}
 
 
 def test_summary_sets_the_best_fully_cross_validated_model_beside_the_paper(tmp_path):
@@ -152,6 +168,8 @@ def test_summary_sets_each_variant_of_the_default_beside_it_on_the_folds_both_ra
              _run("taxi", base + "-x", "writers-f0", "writers", 1.0),  # no default fold to set beside it
              _run("taxi", "other", "cv-r0-f0", "cv", 0.0),  # not a variant of the default
              _run("taxi", "seq2seq", "cv-r0-f0", "cv", 0.0)]  # nor is a baseline
+    # a fold the default ran on one kind of CPU and the variant on another: two training runs, not a pair
+    runs += [_run("taxi", base, "cv-r0-f1", "cv", 0.5), dict(_run("taxi", base + "-x", "cv-r0-f1", "cv", 0.0), machine="other cpu")]
     (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
     part = summarize(tmp_path, "cmd", "budget").read_text().split("## Variants")[1]
     assert f"| taxi | {base}-x | cv | 1 | 75.00 | 50.00 | 1 / 0 |" in part

@@ -108,3 +108,14 @@ def test_actor_learning_rate_scale_survives_sb3s_schedule():
     lrs = {group["lr_scale"]: group["lr"] for group in model.policy.optimizer.param_groups}
     base = PPO_SETTINGS["taxi"]["learning_rate"]
     assert lrs == pytest.approx({1.0: base, ACTOR_LR_SCALE["taxi"]: base * ACTOR_LR_SCALE["taxi"]})
+
+
+def test_ppo_leaves_no_log_folders(tmp_path, monkeypatch):
+    """SB3's default quiet logger makes an empty /tmp/SB3-<time> folder per learn(); ours does not."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    model = make_ppo("taxi", "tree_ddt", seed=0, tree=TREE)
+    model.learn(512)
+    assert list(tmp_path.iterdir()) == []
+    assert model.num_timesteps == 512

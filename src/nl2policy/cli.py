@@ -10,10 +10,9 @@ from typing import Optional
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
 
 from nl2policy.domains import DOMAINS, get_domain
-from nl2policy.trees import TreeError, load_tree_arg, to_text
+from nl2policy.trees import TreeError, load_tree_arg
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="Plain-English robot policies as readable, trainable decision trees.")
 console = Console()

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 from typing import Optional
 
@@ -117,7 +116,8 @@ def translation_experiment(
     import torch
 
     from nl2policy.cli import console, domain_or_fail, err
-    from nl2policy.language.evaluate import run_experiment, summarize
+    from nl2policy.language.evaluate import run_experiment
+    from nl2policy.language.summary import summarize
     from nl2policy.language.models.config import DEFAULT_MODEL
 
     torch.set_num_threads(1)
@@ -135,7 +135,8 @@ def translation_experiment(
     command = "nl2policy translation-experiment " + " ".join(f"--domain {d}" for d in domain) + f" --plan '{plan}' --out {out}"
     if not summarize_only:
         run_experiment(steps, out, progress=lambda msg: err.print(f"fold: {msg}", highlight=False), workers=workers)
-    md = summarize(out, command, "one CPU thread; model seed = CV repeat index (ensemble member m: + m); "
+    md = summarize(out, command, "one CPU thread per training process (with --workers N, an ensemble's members train in N such "
+                                 "processes: the same networks, less wall time); model seed = CV repeat index (ensemble member m: + m); "
                                  "augmentation/synthetic seed 0 (with member_draws, member m: seed m); "
                                  "epochs, data and beam per model in nl2policy/language/models/config.py",
                    planned=[(d, name, protocol, 5 * repeats if protocol == "cv" else 4) for d, name, protocol, repeats in steps])

