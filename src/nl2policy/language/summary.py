@@ -71,13 +71,12 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
         row = {"domain": domain, "model": model, "protocol": protocol, "folds": len(rs),
                "all_valid": all(r["valid"] == r["n"] for r in rs), "train_pairs": rs[0]["train_pairs"],
                "seconds_per_fold": round(mean(r["seconds"] for r in rs), 1),
-               "machines": {m: sum(fold_machine(r) == m for r in rs) for m in labels if any(fold_machine(r) == m for r in rs)}}
+               "machines": {m: n for m in labels if (n := sum(fold_machine(r) == m for r in rs))}}
         for m in ("tree_acc", "token_acc", "policy_acc"):
             vals = [100 * r[m] for r in rs]
             row[m] = {"mean": round(mean(vals), 2), "std": round(pstdev(vals), 2)}
         rows.append(row)
     meta = provenance(command)
-    (out / "translation.json").write_text(json.dumps({"meta": meta, "budget": budget, "rows": rows}, indent=2))
     lines = ["# Translation accuracy (%), mean (std) over folds", "", f"Made by: `{command}`  ", f"On: {meta['made']}  ",
              f"Budget and seeds: {budget}", "",
              "Protocols: `cv` = 5-fold cross-validation, fold seeds 0..R-1 (R repeats, see folds column); "
