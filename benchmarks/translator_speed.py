@@ -106,7 +106,8 @@ def main() -> None:
     median = statistics.median(latencies)
     p90 = latencies[int(0.9 * len(latencies))]
     lines = [f"command: .venv/bin/python benchmarks/translator_speed.py --domain {args.domain} --threads {args.threads} "
-             f"--latency-threads {args.latency_threads}" + (" --no-compare" if args.no_compare else ""),
+             f"--latency-threads {args.latency_threads}" + (f" --model {args.model}" if args.model else "")
+             + (" --no-compare" if args.no_compare else ""),
              f"model {name}, domain {args.domain}, {args.threads} torch threads training, {args.latency_threads} translating, "
              f"{os.cpu_count()} cores ({machine()}), "
              f"load average (1 min) at start {load_start:.1f}, at end {os.getloadavg()[0]:.1f}",

@@ -116,3 +116,17 @@ def test_vectorized_tree_actions_match_domain_tree_action(domain):
     states = uniform_states(domain, 200, seed=5)
     for tree in distinct_trees(domain)[:10]:
         assert tree_actions_batch(domain, tree, states).tolist() == [d.tree_action(tree, x) for x in states]
+
+
+def test_discretization_prunes_a_question_the_path_already_answers():
+    # a padded DDT after training may ask "at the village?" under "at the airport? yes"; no taxi
+    # is at both, so the discretized tree drops that node and keeps its no branch
+    tree = Node("at_airport", Node("at_village", Leaf("go_city"), Leaf("wait")),
+                Node("has_passenger", Leaf("go_airport"), Leaf("go_city")))
+    taxi = get_domain("taxi")
+    out = ddt_to_tree("taxi", tree_to_ddt("taxi", tree))
+    assert out == Node("at_airport", Leaf("wait"), Node("has_passenger", Leaf("go_airport"), Leaf("go_city")))
+    assert taxi.same_policy(out, tree)
+    assert taxi.forced_answer({"at_airport": False, "at_city": False}, "at_village") is True
+    assert taxi.forced_answer({"at_airport": False}, "at_village") is None
+    assert taxi.forced_answer({}, "has_passenger") is None

@@ -1,9 +1,10 @@
 """The translation experiment's tables: means over folds, held-out writer names, what was not run."""
 
+import dataclasses
 import json
 
 from nl2policy.language.evaluate import held_out_writers
-from nl2policy.language.summary import summarize
+from nl2policy.language.summary import machine_kinds, summarize
 
 
 def _run(domain, model, fold, protocol, tree_acc):
@@ -190,3 +191,32 @@ def test_fold_result_of_a_larger_ensemble_also_records_its_first_three_members(m
     monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["tiny"], ensemble=3))
     three = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
     assert r["first_3_members_tree_acc"] == three["tree_acc"] and "first_3_members_tree_acc" not in three
+
+
+def test_machines_whose_folds_retrain_the_same_networks_count_as_one_kind(tmp_path):
+    from nl2policy.language.models.config import DEFAULT_MODEL as base, MODELS
+
+    six = next(name for name, cfg in MODELS.items() if cfg == dataclasses.replace(MODELS[base], ensemble=6))
+    runs = []
+    for f in range(5):  # the six-member model on an unrecorded machine, the default's own folds on "cpu x"
+        runs += [dict(_run("taxi", six, f"cv-r0-f{f}", "cv", 0.75), first_4_members_tree_acc=0.5 + f / 50),
+                 dict(_run("taxi", base, f"cv-r0-f{f}", "cv", 0.5 + f / 50), machine="cpu x")]
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
+    md = summarize(tmp_path, "cmd", "budget").read_text()
+    assert "A with B 5 of 5" in md and "one kind of CPU in the paired tables (all of at least 5 agree): B = A." in md
+    assert f"| taxi | {six} | cv | 5 | 75.00 | 54.00 | 5 / 0 |" in md.split("## Variants")[1]  # paired across A and B
+    report = json.loads((tmp_path / "translation.json").read_text())
+    assert report["reproduction"] == [{"machines": ["cpu x", "not recorded"], "agree": 5, "folds": 5}]
+
+    # one fold that disagrees: two kinds, and the variants are no longer set beside the default
+    runs[-1]["tree_acc"] = 0.0
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
+    md = summarize(tmp_path, "cmd", "budget").read_text()
+    assert "A with B 4 of 5" in md and "one kind of CPU" not in md and "## Variants" not in md
+
+
+def test_too_few_agreeing_folds_do_not_make_one_kind():
+    labels = {"x": "A", "y": "B", "z": "C"}
+    assert machine_kinds({("x", "y"): (4, 4)}, labels) == {"x": "x", "y": "y", "z": "z"}
+    assert machine_kinds({("x", "y"): (5, 5), ("y", "z"): (6, 6)}, labels) == {"x": "x", "y": "x", "z": "x"}
+    assert machine_kinds({("x", "x"): (9, 9), ("x", "z"): (8, 9)}, labels) == {"x": "x", "y": "y", "z": "z"}

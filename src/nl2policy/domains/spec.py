@@ -71,6 +71,13 @@ class Domain:
         combos = (dict(zip(self.questions, bits)) for bits in itertools.product((False, True), repeat=len(self.questions)))
         return [a for a in combos if self.is_possible(a)]
 
+    def forced_answer(self, answered: Mapping[str, bool], question: str) -> bool | None:
+        """The one answer `question` can have where the answers in `answered` hold, or None if
+        both can: under "at the airport? yes", "at the village?" is always no. A tree that asks
+        it there has a branch no state reaches."""
+        seen = {a[question] for a in self.possible_answer_sets if all(a[q] == v for q, v in answered.items())}
+        return seen.pop() if len(seen) == 1 else None
+
     def same_policy(self, a: Tree, b: Tree) -> bool:
         return all(a.act(ans) == b.act(ans) for ans in self.possible_answer_sets)
 

@@ -105,7 +105,7 @@ DEFAULT_PLAN = "best:cv1,writers;single:cv1,writers;ablation:cv1,writers;seq2seq
 def translation_experiment(
     domain: list[str] = typer.Option(["taxi", "highway"], help="Domains"),
     plan: str = typer.Option(DEFAULT_PLAN, help="model:protocols;... with cvR = R repeats of 5-fold CV, writers = leave-writers-out; "
-                                               "'best' = the default model (an ensemble of three), 'single' = one of its "
+                                               "'best' = the default model (an ensemble of four), 'single' = one of its "
                                                "networks, 'ablation' = one network without synthetic data"),
     out: Path = typer.Option(Path("results/translation"), help="Folder for runs.jsonl, translation.md/.json/.png"),
     summarize_only: bool = typer.Option(False, help="Only rewrite the tables from the folds already in runs.jsonl"),

@@ -8,6 +8,7 @@ by fold pair only folds that one kind of CPU trained (a fold retrains bit for bi
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from statistics import mean, pstdev
 from typing import Sequence
@@ -49,6 +50,52 @@ def fold_machine(run: dict) -> str:
 
 
 
+MIN_REPRODUCED = 5
+"""Folds on which two kinds of CPU must have trained the same networks, agreeing on every one,
+before the paired tables set one's folds beside the other's."""
+
+
+
+def reproduction_checks(runs: list[dict]) -> dict[tuple[str, str], tuple[int, int]]:
+    """Do two records of the same networks on the same fold agree? A fold of model Y records its
+    networks decoded with less of a choice (DECODING_ALTERNATIVES); where that is exactly model X's
+    config (Y = seq2tree-minilm-synth-x6-mentions with its first four members: X =
+    seq2tree-minilm-synth-x4-mentions), X's own fold of the same domain retrained those networks and
+    must score the same. Per pair of machines (sorted): (folds whose tree accuracy agrees, folds).
+    On one machine this checks that training is deterministic; across two, whether they are one
+    kind of CPU as far as training goes (the earlier machine never recorded its kind)."""
+    by_config: dict = {}
+    for name, cfg in MODELS.items():
+        by_config.setdefault(cfg, []).append(name)
+    index = {(r["domain"], r["model"], r["fold"]): r for r in runs}
+    checks: dict[tuple[str, str], tuple[int, int]] = {}
+    for r in runs:
+        if r["model"] not in MODELS:
+            continue
+        for key, (attr, off, _) in DECODING_ALTERNATIVES.items():
+            if key not in r:
+                continue
+            for other in by_config.get(replace(MODELS[r["model"]], **{attr: off}), []):
+                if (o := index.get((r["domain"], other, r["fold"]))) is not None:
+                    pair = tuple(sorted((fold_machine(r), fold_machine(o))))
+                    agree, n = checks.get(pair, (0, 0))
+                    checks[pair] = (agree + (o["tree_acc"] == r[key]), n + 1)
+    return checks
+
+
+
+def machine_kinds(checks: dict[tuple[str, str], tuple[int, int]], labels: dict[str, str]) -> dict[str, str]:
+    """Each machine -> the first-labelled machine it reproduces (itself if none): two machines are
+    one kind when their checks agree on every fold, and on at least MIN_REPRODUCED."""
+    kind = {m: m for m in labels}
+    for (a, b), (agree, n) in sorted(checks.items(), key=lambda c: [labels.get(m, m) for m in c[0]]):
+        if a != b and agree == n >= MIN_REPRODUCED and a in kind and b in kind:
+            first, second = sorted((kind[a], kind[b]), key=lambda m: labels[m])
+            kind = {m: first if k == second else k for m, k in kind.items()}
+    return kind
+
+
+
 def machine_labels(runs: list[dict]) -> dict[str, str]:
     """A short label per kind of CPU (A, B, ...), in the order the folds first name them: the
     tables say which machine trained each row, since folds reproduce only on one kind."""
@@ -66,6 +113,8 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
     runs = _one_per_fold(read_runs(out / "runs.jsonl"))
     table = _by_row(runs)
     labels = machine_labels(runs)
+    checks = reproduction_checks(runs)
+    kinds = machine_kinds(checks, labels)
     rows = []
     for (domain, model, protocol), rs in sorted(table.items()):
         row = {"domain": domain, "model": model, "protocol": protocol, "folds": len(rs),
@@ -83,7 +132,8 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
              "`writers` = leave-writers-out, 4 folds of 2 held-out writers (fold seed 0). "
              "Model seed = repeat index. Paper's HAN2Tree (CV): taxi 86.30, highway 80.38.", "",
              "Machines (folds retrain bit for bit only on the kind of CPU that first ran them; seconds per fold "
-             "depend on it and on the worker processes): " + "; ".join(f"{label} = {m}" for m, label in labels.items()) + ".", "",
+             "depend on it and on the worker processes): " + "; ".join(f"{label} = {m}" for m, label in labels.items()) + ".",
+             *_reproduction_lines(checks, kinds, labels), "",
              "| domain | model | protocol | folds | tree acc | token acc | policy acc | all outputs valid | train pairs | s/fold | machine |",
              "|---|---|---|---:|---:|---:|---:|---|---:|---:|---|"]
     for r in rows:
@@ -94,13 +144,15 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
     lines += _against_paper(rows)
     lines += _writer_breakdown(runs)
     lines += _decoding_effects(runs)
-    lines += _variants(runs)
+    lines += _variants(runs, kinds)
     lines += _calibration(runs)
     missing = [f"{d} {m} {p}: {want - len(table.get((d, m, p), []))} of {want} folds"
                for d, m, p, want in planned if len(table.get((d, m, p), [])) < want]
     if missing:
         lines += ["", "**Planned but not run (stopped at the time budget):** " + "; ".join(missing) + "."]
-    (out / "translation.json").write_text(json.dumps({"meta": meta, "budget": budget, "rows": rows, "not_run": missing}, indent=2))
+    (out / "translation.json").write_text(json.dumps({"meta": meta, "budget": budget, "rows": rows, "not_run": missing,
+                                                           "reproduction": [{"machines": list(p), "agree": a, "folds": n}
+                                                                            for p, (a, n) in sorted(checks.items())]}, indent=2))
     md = out / "translation.md"
     md.write_text("\n".join(lines) + "\n")
     _figure(rows, out / "translation.png")
@@ -173,13 +225,28 @@ in how many are trained and how, or in how they are decoded."""
 
 
 
-def _variants(runs: list[dict], base: str = DEFAULT_MODEL) -> list[str]:
+def _reproduction_lines(checks: dict[tuple[str, str], tuple[int, int]], kinds: dict[str, str],
+                        labels: dict[str, str]) -> list[str]:
+    if not checks:
+        return []
+    pairs = sorted(checks.items(), key=lambda c: [labels.get(m, m) for m in c[0]])
+    same = sorted({f"{labels[m]} = {labels[k]}" for m, k in kinds.items() if m != k})
+    return ["Reproduction checks (one fold's networks recorded by two models, e.g. a model's first four "
+            "members and the four-member model's own fold; folds whose tree accuracy agrees): "
+            + "; ".join(" with ".join(sorted(labels.get(m, m) for m in pair)) + f" {agree} of {n}" for pair, (agree, n) in pairs)
+            + ". " + (f"Counted as one kind of CPU in the paired tables (all of at least {MIN_REPRODUCED} agree): "
+                      + ", ".join(same) + "." if same else "")]
+
+
+
+def _variants(runs: list[dict], kinds: dict[str, str], base: str = DEFAULT_MODEL) -> list[str]:
     """Each variant of the default (see VARIANT_FIELDS) beside the default on exactly the folds both
-    ran on the same kind of machine: a variant run on repeat 0 only must not be read against the
-    default's mean over three repeats, since one fold moves by several points with the training
-    run alone, and a fold retrained on another kind of CPU is another training run."""
+    ran on the same kind of machine (`kinds`: machine_kinds): a variant run on repeat 0 only must
+    not be read against the default's mean over three repeats, since one fold moves by several
+    points with the training run alone, and a fold retrained on another kind of CPU is another
+    training run."""
     same = lambda name: name in MODELS and all(getattr(MODELS[name], f) == getattr(MODELS[base], f) for f in VARIANT_FIELDS)
-    key = lambda r: (r["domain"], r["fold"], fold_machine(r))
+    key = lambda r: (r["domain"], r["fold"], kinds.get(fold_machine(r), fold_machine(r)))
     ref = {key(r): 100 * r["tree_acc"] for r in runs if r["model"] == base}
     rows = _by_row([r for r in runs if r["model"] != base and same(r["model"]) and key(r) in ref])
     if not rows:

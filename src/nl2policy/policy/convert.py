@@ -132,8 +132,10 @@ def ddt_to_tree(domain_name: str, ddt: DDT, tolerance: Optional[float] = None) -
     as the nearest domain question with that feature and direction (branches swapped for a
     negated question) or kept as a raw test ``raw:<feature><op><threshold>``; each leaf keeps
     its most likely action. Pruned: nodes whose threshold lies outside the [0, 1] feature box
-    (they always answer the same), questions already answered higher on the path, and nodes
-    whose two branches came out identical."""
+    (they always answer the same), questions whose answer the path already fixes (asked higher
+    up, or ruled out by the world: "at the village?" under "at the airport? yes"), and nodes
+    whose two branches came out identical. Each prune keeps the action in every state the world
+    can produce (Domain.possible_answer_sets)."""
     domain = get_domain(domain_name)
     tol = MATCH_TOLERANCE[domain_name] if tolerance is None else tolerance
     candidates = _single_feature_questions(domain)
@@ -163,8 +165,8 @@ def ddt_to_tree(domain_name: str, ddt: DDT, tolerance: Optional[float] = None) -
         swapped = (sign > 0) != greater
         if swapped:
             yes_branch, no_branch = no_branch, yes_branch
-        if question in answered:
-            return build(yes_branch if answered[question] else no_branch, answered)
+        if (forced := domain.forced_answer(answered, question)) is not None:
+            return build(yes_branch if forced else no_branch, answered)
         return _join(question, build(yes_branch, {**answered, question: True}),
                      build(no_branch, {**answered, question: False}))
 
