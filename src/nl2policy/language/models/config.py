@@ -62,7 +62,8 @@ MODELS: dict[str, ModelConfig] = {
     # members" in translation.md): on taxi's 15 CV folds 81.50 against three members' 79.83, and
     # leave-writers-out 79.00 against 74.00. Two worker processes train four members in two
     # rounds, as they do three (whose third member trains alone): benchmarks/translator_speed.py
-    # measured 200 s for four against 196 s for three, and the same latency
+    # on one machine, results/translation/translator_speed.txt (four) against
+    # translator_speed-x3-same-machine.txt (three): about 10% more training time, the same latency
     "seq2tree-minilm-synth-x4-mentions": ModelConfig("flat", "tree", True, 200, minilm_layers=6, ensemble=4,
                                                      member_draws=True, beam=4, mention_cost=1.0),
     # experimental: seq2tree-minilm-synth-x3's networks, decoded with a cost of 0.5 nats on each branch that
