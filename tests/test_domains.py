@@ -129,3 +129,21 @@ def test_evaluation_is_reproducible():
     a = evaluate("highway", tree_policy("highway", tree), episodes=2, seed=5)
     b = evaluate("highway", tree_policy("highway", tree), episodes=2, seed=5)
     assert a.returns == b.returns
+
+
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_the_envs_never_produce_an_answer_set_the_spec_calls_impossible(domain):
+    # discretization prunes branches that only impossible answer sets reach (Domain.forced_answer),
+    # which changes nothing only if the env never produces one
+    d, env = get_domain(domain), make_env(domain)
+    rng = np.random.default_rng(0)
+    obs, _ = env.reset(seed=0)
+    seen = set()
+    for _ in range(300):
+        answers = d.answers(obs)
+        assert d.is_possible(answers), answers
+        seen.add(tuple(answers.values()))
+        obs, _, terminated, truncated, _ = env.step(int(rng.integers(len(d.actions))))
+        if terminated or truncated:
+            obs, _ = env.reset(seed=int(rng.integers(1 << 30)))
+    assert len(seen) >= 5  # the walk visited several kinds of state, not one
