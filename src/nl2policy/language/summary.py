@@ -88,11 +88,18 @@ def machine_kinds(checks: dict[tuple[str, str], tuple[int, int]], labels: dict[s
     """Each machine -> the first-labelled machine it reproduces (itself if none): two machines are
     one kind when their checks agree on every fold, and on at least MIN_REPRODUCED."""
     kind = {m: m for m in labels}
-    for (a, b), (agree, n) in sorted(checks.items(), key=lambda c: [labels.get(m, m) for m in c[0]]):
-        if a != b and agree == n >= MIN_REPRODUCED and a in kind and b in kind:
+    for (a, b), (agree, n) in _in_label_order(checks, labels):
+        if a != b and agree == n >= MIN_REPRODUCED:
             first, second = sorted((kind[a], kind[b]), key=lambda m: labels[m])
             kind = {m: first if k == second else k for m, k in kind.items()}
     return kind
+
+
+
+def _in_label_order(checks: dict[tuple[str, str], tuple[int, int]], labels: dict[str, str]) -> list:
+    """The checks sorted by their machines' labels (A with A, A with B, ...). Both come from the
+    same folds, so every machine a check names has a label."""
+    return sorted(checks.items(), key=lambda c: sorted(labels[m] for m in c[0]))
 
 
 
@@ -229,11 +236,11 @@ def _reproduction_lines(checks: dict[tuple[str, str], tuple[int, int]], kinds: d
                         labels: dict[str, str]) -> list[str]:
     if not checks:
         return []
-    pairs = sorted(checks.items(), key=lambda c: [labels.get(m, m) for m in c[0]])
     same = sorted({f"{labels[m]} = {labels[k]}" for m, k in kinds.items() if m != k})
     return ["Reproduction checks (one fold's networks recorded by two models, e.g. a model's first four "
             "members and the four-member model's own fold; folds whose tree accuracy agrees): "
-            + "; ".join(" with ".join(sorted(labels.get(m, m) for m in pair)) + f" {agree} of {n}" for pair, (agree, n) in pairs)
+            + "; ".join(" with ".join(sorted(labels[m] for m in pair)) + f" {agree} of {n}"
+                        for pair, (agree, n) in _in_label_order(checks, labels))
             + ". " + (f"Counted as one kind of CPU in the paired tables (all of at least {MIN_REPRODUCED} agree): "
                       + ", ".join(same) + "." if same else "")]
 
