@@ -3,6 +3,8 @@
 import dataclasses
 import json
 
+import pytest
+
 from nl2policy.language.evaluate import held_out_writers
 from nl2policy.language.summary import machine_kinds, summarize
 
@@ -162,18 +164,21 @@ def test_summary_sets_each_variant_of_the_default_beside_it_on_the_folds_both_ra
     from nl2policy.language.models.config import DEFAULT_MODEL as base, MODELS
 
     monkeypatch.setitem(MODELS, base + "-x", dataclasses.replace(MODELS[base], ensemble=6, beam=1))
-    monkeypatch.setitem(MODELS, "other", dataclasses.replace(MODELS[base], synthetic=0))  # other training data
+    monkeypatch.setitem(MODELS, "other", dataclasses.replace(MODELS[base], synthetic=0))  # no synthetic pairs: the ablation
+    monkeypatch.setitem(MODELS, base + "-more", dataclasses.replace(MODELS[base], synthetic=2 * MODELS[base].synthetic))
 
     runs = [_run("taxi", base, f"cv-r{r}-f0", "cv", acc) for r, acc in ((0, 0.5), (1, 1.0), (2, 1.0))]
     runs += [_run("taxi", base + "-x", "cv-r0-f0", "cv", 0.75),  # the default's other repeats must not count
              _run("taxi", base + "-x", "writers-f0", "writers", 1.0),  # no default fold to set beside it
              _run("taxi", "other", "cv-r0-f0", "cv", 0.0),  # not a variant of the default
+             _run("taxi", base + "-more", "cv-r1-f0", "cv", 0.25),  # more synthetic pairs: a variant
              _run("taxi", "seq2seq", "cv-r0-f0", "cv", 0.0)]  # nor is a baseline
     # a fold the default ran on one kind of CPU and the variant on another: two training runs, not a pair
     runs += [_run("taxi", base, "cv-r0-f1", "cv", 0.5), dict(_run("taxi", base + "-x", "cv-r0-f1", "cv", 0.0), machine="other cpu")]
     (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
     part = summarize(tmp_path, "cmd", "budget").read_text().split("## Variants")[1]
     assert f"| taxi | {base}-x | cv | 1 | 75.00 | 50.00 | 1 / 0 |" in part
+    assert f"| taxi | {base}-more | cv | 1 | 25.00 | 100.00 | 0 / 1 |" in part
     assert "writers" not in part and "| taxi | other |" not in part and "seq2seq" not in part
 
 
@@ -215,8 +220,34 @@ def test_machines_whose_folds_retrain_the_same_networks_count_as_one_kind(tmp_pa
     assert "A with B 4 of 5" in md and "one kind of CPU" not in md and "## Variants" not in md
 
 
+def test_decoding_choices_name_the_model_whose_config_the_smaller_decoding_is(tmp_path, monkeypatch):
+    from nl2policy.language.models.config import DEFAULT_MODEL as base, MODELS
+
+    six = next(name for name, cfg in MODELS.items() if cfg == dataclasses.replace(MODELS[base], ensemble=6))
+    monkeypatch.setitem(MODELS, "wide-six", dataclasses.replace(MODELS[six], hidden=3 * MODELS[six].hidden))
+    runs = [dict(_run("taxi", name, "cv-r0-f0", "cv", 0.75), first_4_members_tree_acc=0.5) for name in (six, "wide-six")]
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
+    md = summarize(tmp_path, "cmd", "budget").read_text()
+    assert f"| taxi | {six} | cv, repeat 0 | 1 | its first 4 members (= {base}) | 75.00 | 50.00 | 1 / 0 |" in md
+    # other networks than any model's: nothing named, and nothing counted as a reproduction check
+    assert "| taxi | wide-six | cv, repeat 0 | 1 | its first 4 members | 75.00 | 50.00 | 1 / 0 |" in md
+    assert json.loads((tmp_path / "translation.json").read_text())["reproduction"] == []
+
+
 def test_too_few_agreeing_folds_do_not_make_one_kind():
     labels = {"x": "A", "y": "B", "z": "C"}
     assert machine_kinds({("x", "y"): (4, 4)}, labels) == {"x": "x", "y": "y", "z": "z"}
     assert machine_kinds({("x", "y"): (5, 5), ("y", "z"): (6, 6)}, labels) == {"x": "x", "y": "x", "z": "x"}
     assert machine_kinds({("x", "x"): (9, 9), ("x", "z"): (8, 9)}, labels) == {"x": "x", "y": "y", "z": "z"}
+
+
+def test_plan_names_models_protocols_and_optionally_one_domain():
+    from nl2policy.language.commands import parse_plan
+    from nl2policy.language.models.config import DEFAULT_MODEL
+
+    steps = parse_plan("best:writers,cv3;taxi/seq2seq:cv1", ["taxi", "highway"], DEFAULT_MODEL)
+    assert steps == [("taxi", DEFAULT_MODEL, "writers", 1), ("highway", DEFAULT_MODEL, "writers", 1),
+                     ("taxi", DEFAULT_MODEL, "cv", 3), ("highway", DEFAULT_MODEL, "cv", 3), ("taxi", "seq2seq", "cv", 1)]
+    for bad in ("no-such-model:cv1", "seq2seq", "seq2seq:cvx", "seq2seq:folds", "highway/seq2seq:cv1"):
+        with pytest.raises(ValueError, match="plan part"):
+            parse_plan(bad, ["taxi"], DEFAULT_MODEL)

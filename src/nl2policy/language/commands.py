@@ -99,6 +99,30 @@ def _jsonl_line(domain: str, name: str, line: str, lineno: int) -> dict:
         return {"error": f"line {lineno}: {exc}"}
 
 
+def parse_plan(plan: str, domains: list[str], default_model: str) -> list[tuple[str, str, str, int]]:
+    """'model:protocols;...' -> (domain, model, protocol, repeats) steps, in plan order. A model
+    prefixed with 'DOMAIN/' runs for that domain only (a probe of one domain must not be listed as
+    not run in the others); protocols are cvR (R repeats of 5-fold CV) and writers."""
+    from nl2policy.language.models.config import MODELS
+
+    alias = {"best": default_model, "single": "seq2tree-minilm-synth", "ablation": "seq2tree-minilm"}
+    steps = []
+    for part in plan.split(";"):
+        name, sep, protocols = part.partition(":")
+        only, _, name = name.rpartition("/")
+        name = alias.get(name, name)
+        if not sep or name not in MODELS:
+            raise ValueError(f"plan part {part!r}: expected MODEL:PROTOCOLS with a model of {sorted(MODELS)}")
+        if only and only not in domains:
+            raise ValueError(f"plan part {part!r}: {only!r} is not one of the --domain options {domains}")
+        for p in protocols.split(","):
+            if not (p == "writers" or (p.startswith("cv") and (p[2:] == "" or p[2:].isdigit()))):
+                raise ValueError(f"plan part {part!r}: protocol {p!r} is not cvR or writers")
+            protocol, repeats = ("cv", int(p[2:] or 1)) if p.startswith("cv") else ("writers", 1)
+            steps += [(d, name, protocol, repeats) for d in domains if not only or d == only]
+    return steps
+
+
 DEFAULT_PLAN = "best:cv1,writers;single:cv1,writers;ablation:cv1,writers;seq2seq:cv1;seq2tree:cv1;han2tree:cv1"
 
 
@@ -106,7 +130,8 @@ def translation_experiment(
     domain: list[str] = typer.Option(["taxi", "highway"], help="Domains"),
     plan: str = typer.Option(DEFAULT_PLAN, help="model:protocols;... with cvR = R repeats of 5-fold CV, writers = leave-writers-out; "
                                                "'best' = the default model (an ensemble of four), 'single' = one of its "
-                                               "networks, 'ablation' = one network without synthetic data"),
+                                               "networks, 'ablation' = one network without synthetic data; "
+                                               "DOMAIN/model runs for that domain only"),
     out: Path = typer.Option(Path("results/translation"), help="Folder for runs.jsonl, translation.md/.json/.png"),
     summarize_only: bool = typer.Option(False, help="Only rewrite the tables from the folds already in runs.jsonl"),
     workers: int = typer.Option(1, min=1, help="Processes training an ensemble's members side by side (one thread "
@@ -123,14 +148,11 @@ def translation_experiment(
     torch.set_num_threads(1)
     for d in domain:
         domain_or_fail(d)
-    alias = {"best": DEFAULT_MODEL, "single": "seq2tree-minilm-synth", "ablation": "seq2tree-minilm"}
-    steps = []
-    for part in plan.split(";"):
-        name, protocols = part.split(":")
-        name = alias.get(name, name)
-        for p in protocols.split(","):
-            protocol, repeats = ("cv", int(p[2:] or 1)) if p.startswith("cv") else ("writers", 1)
-            steps += [(d, name, protocol, repeats) for d in domain]
+    try:
+        steps = parse_plan(plan, domain, DEFAULT_MODEL)
+    except ValueError as exc:
+        err.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(2)
     # run in plan order (most important first): the experiment resumes, so what finished is kept
     command = "nl2policy translation-experiment " + " ".join(f"--domain {d}" for d in domain) + f" --plan '{plan}' --out {out}"
     if not summarize_only:

@@ -32,8 +32,8 @@ from nl2policy.trees.parse import validate
 DECODING_ALTERNATIVES = {"greedy_tree_acc": ("beam", 1, "greedy (beam of 1)"),
                          "no_leaf_cost_tree_acc": ("leaf_cost", 0.0, "no early-leaf cost"),
                          "no_mention_cost_tree_acc": ("mention_cost", 0.0, "no action-mention check"),
-                         "first_3_members_tree_acc": ("ensemble", 3, "its first 3 members (seq2tree-minilm-synth-x3's networks)"),
-                         "first_4_members_tree_acc": ("ensemble", 4, "its first 4 members (the default's networks)"),
+                         "first_3_members_tree_acc": ("ensemble", 3, "its first 3 members"),
+                         "first_4_members_tree_acc": ("ensemble", 4, "its first 4 members"),
                          "first_5_members_tree_acc": ("ensemble", 5, "its first 5 members")}
 
 

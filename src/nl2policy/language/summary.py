@@ -64,24 +64,30 @@ def reproduction_checks(runs: list[dict]) -> dict[tuple[str, str], tuple[int, in
     must score the same. Per pair of machines (sorted): (folds whose tree accuracy agrees, folds).
     On one machine this checks that training is deterministic; across two, whether they are one
     kind of CPU as far as training goes (the earlier machine never recorded its kind)."""
-    by_config: dict = {}
-    for name, cfg in MODELS.items():
-        by_config.setdefault(cfg, []).append(name)
     index = {(r["domain"], r["model"], r["fold"]): r for r in runs}
     checks: dict[tuple[str, str], tuple[int, int]] = {}
     for r in runs:
-        if r["model"] not in MODELS:
-            continue
-        for key, (attr, off, _) in DECODING_ALTERNATIVES.items():
+        for key in DECODING_ALTERNATIVES:
             if key not in r:
                 continue
-            for other in by_config.get(replace(MODELS[r["model"]], **{attr: off}), []):
+            for other in decoded_as(r["model"], key):
                 if (o := index.get((r["domain"], other, r["fold"]))) is not None:
                     pair = tuple(sorted((fold_machine(r), fold_machine(o))))
                     agree, n = checks.get(pair, (0, 0))
                     checks[pair] = (agree + (o["tree_acc"] == r[key]), n + 1)
     return checks
 
+
+
+def decoded_as(model: str, key: str) -> list[str]:
+    """The models whose config is exactly `model` decoded with less of one choice
+    (DECODING_ALTERNATIVES[key]): seq2tree-minilm-synth-x6-mentions with its first four members
+    is seq2tree-minilm-synth-x4-mentions. Such a model's own fold trains the same networks."""
+    if model not in MODELS:
+        return []
+    attr, off, _ = DECODING_ALTERNATIVES[key]
+    target = replace(MODELS[model], **{attr: off})
+    return [name for name, cfg in MODELS.items() if cfg == target]
 
 
 def machine_kinds(checks: dict[tuple[str, str], tuple[int, int]], labels: dict[str, str]) -> dict[str, str]:
@@ -216,7 +222,8 @@ def _decoding_effects(runs: list[dict]) -> list[str]:
                 part = r["protocol"] if r["protocol"] != "cv" else ("cv, repeat 0" if "-r0-" in r["fold"] else "cv, repeats 1+")
                 groups.setdefault((r["domain"], r["model"], part), []).append(r)
         for (domain, model, part), rs in sorted(groups.items()):
-            lines.append(f"| {domain} | {model} | {part} | {len(rs)} | {label} | "
+            same = decoded_as(model, key)
+            lines.append(f"| {domain} | {model} | {part} | {len(rs)} | {label}{' (= ' + ', '.join(same) + ')' if same else ''} | "
                          + _paired_cells([(100 * r["tree_acc"], 100 * r[key]) for r in rs]))
     if not lines:
         return []
@@ -226,9 +233,20 @@ def _decoding_effects(runs: list[dict]) -> list[str]:
 
 
 
-VARIANT_FIELDS = ("encoder", "decoder", "minilm", "minilm_layers", "synthetic")
-"""What makes a model a variant of the default: the same networks and training data, differing only
-in how many are trained and how, or in how they are decoded."""
+VARIANT_FIELDS = ("encoder", "decoder", "minilm", "minilm_layers")
+"""What makes a model a variant of the default: the same kind of network, also trained on synthetic
+pairs (see `is_variant`), differing in how many are trained, on how much of which data, how wide,
+or how they are decoded."""
+
+
+def is_variant(name: str, base: str = DEFAULT_MODEL) -> bool:
+    """Whether `name` is a variant of `base` (VARIANT_FIELDS equal, and both trained with synthetic
+    pairs or both without: the models without them are the ablation, set beside one another in the
+    main table)."""
+    if name not in MODELS or name == base:
+        return False
+    cfg, ref = MODELS[name], MODELS[base]
+    return all(getattr(cfg, f) == getattr(ref, f) for f in VARIANT_FIELDS) and bool(cfg.synthetic) == bool(ref.synthetic)
 
 
 
@@ -252,10 +270,9 @@ def _variants(runs: list[dict], kinds: dict[str, str], base: str = DEFAULT_MODEL
     not be read against the default's mean over three repeats, since one fold moves by several
     points with the training run alone, and a fold retrained on another kind of CPU is another
     training run."""
-    same = lambda name: name in MODELS and all(getattr(MODELS[name], f) == getattr(MODELS[base], f) for f in VARIANT_FIELDS)
     key = lambda r: (r["domain"], r["fold"], kinds.get(fold_machine(r), fold_machine(r)))
     ref = {key(r): 100 * r["tree_acc"] for r in runs if r["model"] == base}
-    rows = _by_row([r for r in runs if r["model"] != base and same(r["model"]) and key(r) in ref])
+    rows = _by_row([r for r in runs if is_variant(r["model"], base) and key(r) in ref])
     if not rows:
         return []
     lines = ["", f"## Variants of the default ({base}), each beside the default on the same folds", "",
