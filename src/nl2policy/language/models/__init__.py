@@ -16,8 +16,9 @@ branch that ends early (an action where a question could still go) 0.5 nats;
 seq2tree-minilm-synth-x3-swap (experimental) = x3 trained with counterfactual augmented
 copies (the actions a description names permuted in text and tree, language/counterfactual.py);
 seq2tree-minilm-synth-x6 and -x6-mentions (measured, not defaults) = six members: 1.5x the default's training time;
-seq2tree-minilm-synth400-, -synth-aug2- and -synth-h128-x4-mentions (experimental) = the default
-with twice the synthetic pairs, two augmented copies per description, or twice the hidden width.
+seq2tree-minilm-synth400-, -synth-aug2-, -synth-h128-, -synth-h48- and -synth-drop45-x4-mentions
+(experimental) = the default with twice the synthetic pairs, two augmented copies per description,
+a hidden width of 128 or 48, or dropout 0.45: each below the default on taxi's CV repeat 0.
 Configurations live in `config.py`; the network in `network.py`.
 """
 
