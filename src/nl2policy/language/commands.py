@@ -116,9 +116,12 @@ def parse_plan(plan: str, domains: list[str], default_model: str) -> list[tuple[
         if only and only not in domains:
             raise ValueError(f"plan part {part!r}: {only!r} is not one of the --domain options {domains}")
         for p in protocols.split(","):
-            if not (p == "writers" or (p.startswith("cv") and (p[2:] == "" or p[2:].isdigit()))):
+            if p == "writers":
+                protocol, repeats = "writers", 1
+            elif p.startswith("cv") and (p[2:] or "1").isdigit():
+                protocol, repeats = "cv", int(p[2:] or 1)
+            else:
                 raise ValueError(f"plan part {part!r}: protocol {p!r} is not cvR or writers")
-            protocol, repeats = ("cv", int(p[2:] or 1)) if p.startswith("cv") else ("writers", 1)
             steps += [(d, name, protocol, repeats) for d in domains if not only or d == only]
     return steps
 

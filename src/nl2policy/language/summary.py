@@ -265,7 +265,7 @@ def _reproduction_lines(checks: dict[tuple[str, str], tuple[int, int]], kinds: d
 
 
 def _variants(runs: list[dict], kinds: dict[str, str], base: str = DEFAULT_MODEL) -> list[str]:
-    """Each variant of the default (see VARIANT_FIELDS) beside the default on exactly the folds both
+    """Each variant of the default (see is_variant) beside the default on exactly the folds both
     ran on the same kind of machine (`kinds`: machine_kinds): a variant run on repeat 0 only must
     not be read against the default's mean over three repeats, since one fold moves by several
     points with the training run alone, and a fold retrained on another kind of CPU is another
