@@ -158,6 +158,9 @@ def translation_experiment(
         raise typer.Exit(2)
     # run in plan order (most important first): the experiment resumes, so what finished is kept
     command = "nl2policy translation-experiment " + " ".join(f"--domain {d}" for d in domain) + f" --plan '{plan}' --out {out}"
+    if summarize_only and not (out / "runs.jsonl").is_file():
+        err.print(f"[red]error:[/red] no folds to summarise: {out / 'runs.jsonl'} does not exist (run without --summarize-only first)")
+        raise typer.Exit(2)
     if not summarize_only:
         run_experiment(steps, out, progress=lambda msg: err.print(f"fold: {msg}", highlight=False), workers=workers)
     md = summarize(out, command, "one CPU thread per training process (with --workers N, an ensemble's members train in N such "
