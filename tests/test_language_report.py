@@ -166,12 +166,14 @@ def test_summary_sets_each_variant_of_the_default_beside_it_on_the_folds_both_ra
     monkeypatch.setitem(MODELS, base + "-x", dataclasses.replace(MODELS[base], ensemble=6, beam=1))
     monkeypatch.setitem(MODELS, "other", dataclasses.replace(MODELS[base], synthetic=0))  # no synthetic pairs: the ablation
     monkeypatch.setitem(MODELS, base + "-more", dataclasses.replace(MODELS[base], synthetic=2 * MODELS[base].synthetic))
+    monkeypatch.setitem(MODELS, base + "-again", dataclasses.replace(MODELS[base], seed_offset=7))
 
     runs = [_run("taxi", base, f"cv-r{r}-f0", "cv", acc) for r, acc in ((0, 0.5), (1, 1.0), (2, 1.0))]
     runs += [_run("taxi", base + "-x", "cv-r0-f0", "cv", 0.75),  # the default's other repeats must not count
              _run("taxi", base + "-x", "writers-f0", "writers", 1.0),  # no default fold to set beside it
              _run("taxi", "other", "cv-r0-f0", "cv", 0.0),  # not a variant of the default
              _run("taxi", base + "-more", "cv-r1-f0", "cv", 0.25),  # more synthetic pairs: a variant
+             _run("taxi", base + "-again", "cv-r2-f0", "cv", 0.75),  # other seeds only: a rerun
              _run("taxi", "seq2seq", "cv-r0-f0", "cv", 0.0)]  # nor is a baseline
     # a fold the default ran on one kind of CPU and the variant on another: two training runs, not a pair
     runs += [_run("taxi", base, "cv-r0-f1", "cv", 0.5), dict(_run("taxi", base + "-x", "cv-r0-f1", "cv", 0.0), machine="other cpu")]
@@ -179,6 +181,9 @@ def test_summary_sets_each_variant_of_the_default_beside_it_on_the_folds_both_ra
     part = summarize(tmp_path, "cmd", "budget").read_text().split("## Variants")[1]
     assert f"| taxi | {base}-x | cv | 1 | 75.00 | 50.00 | 1 / 0 |" in part
     assert f"| taxi | {base}-more | cv | 1 | 25.00 | 100.00 | 0 / 1 |" in part
+    assert f"| taxi | {base}-again | cv | 1 | 75.00 | 100.00 | 0 / 1 |" in part
+    assert f"{base}-again: the default's own recipe trained again with other seeds" in part  # named as the yardstick
+    assert f"{base}-more: the default's own" not in part and f"{base}-x: the default's own" not in part
     assert "writers" not in part and "| taxi | other |" not in part and "seq2seq" not in part
 
 

@@ -136,7 +136,7 @@ def test_ensemble_averages_members_and_resumes_from_a_checkpoint(one_torch_threa
         for net in full.nets:
             memory = net.encode(batch)
             B = len(texts)
-            _, _, logits = net.run_step(memory, [memory["h0"]], [torch.zeros(B, net.out.in_features - cfg.hidden)],
+            _, _, logits, _ = net.run_step(memory, [memory["h0"]], [torch.zeros(B, net.out.in_features - cfg.hidden)],
                                         [torch.full((B,), net.start_id)], torch.full((B,), -1), torch.zeros(B, dtype=torch.long))
             root.append(torch.softmax(logits.masked_fill(~root_ok, -1e9), -1))
     mean = (root[0] + root[1]) / 2
@@ -193,30 +193,57 @@ def test_training_is_reproducible_from_the_seed(one_torch_thread):
         assert torch.equal(p1, p2)
 
 
-@pytest.mark.parametrize("name", ["seq2tree", "seq2seq"])
-def test_stacked_decoder_step_equals_each_members_own_step(name, one_torch_thread):
+def test_a_seed_offset_is_another_training_run_of_the_same_recipe(one_torch_thread):
+    """seed_offset k trains what seed + k trains (weights and draws alike), and differs from seed."""
+    from nl2policy.language.dataset import member_pairs
+
+    specs = load_corpus("taxi")[:30]
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=1, ensemble=2, synthetic=10, member_draws=True)
+    shifted = dataclasses.replace(cfg, seed_offset=5)
+    draws = lambda c, seed: member_pairs("taxi", specs, range(30), c, seed)
+    assert [draws(shifted, 0)(m) for m in (0, 1)] == [draws(cfg, 5)(m) for m in (0, 1)] != [draws(cfg, 0)(m) for m in (0, 1)]
+    a, b, c = fit("taxi", "s", shifted, draws(shifted, 0), seed=0), fit("taxi", "s", cfg, draws(cfg, 5), seed=5), \
+        fit("taxi", "s", cfg, draws(cfg, 0), seed=0)
+    for na, nb, nc in zip(a.nets, b.nets, c.nets):
+        assert all(torch.equal(p, q) for p, q in zip(na.parameters(), nb.parameters()))
+        assert not all(torch.equal(p, q) for p, q in zip(na.parameters(), nc.parameters()))
+
+
+@pytest.mark.parametrize("name,coverage", [("seq2tree", False), ("seq2seq", False), ("seq2tree", True)])
+def test_stacked_decoder_step_equals_each_members_own_step(name, coverage, one_torch_thread):
     from nl2policy.language.models.network import StackedDecoder, Translator
 
     torch.manual_seed(0)
-    cfg = dataclasses.replace(MODELS[name], hidden=24, embed=12)
+    cfg = dataclasses.replace(MODELS[name], hidden=24, embed=12, coverage=coverage)
     nets = [Translator(cfg, 30, 10, 6).eval() for _ in range(3)]
+    for net in nets:  # a trained network's coverage weights are not the fresh zeros: make them count
+        if coverage:
+            torch.nn.init.normal_(net.unread_scale)
     B, N, h, mem = 4, 7, 24, 48
     words, mask = torch.randn(3, B, N, mem), torch.rand(B, N) > 0.3
     mask[:, 0] = True
-    h_prev, ctx_prev, h_parent = torch.randn(3, B, h), torch.randn(3, B, mem), torch.randn(3, B, h)
+    h_prev, h_parent = torch.randn(3, B, h), torch.randn(3, B, h)
+    ctx_prev = torch.randn(3, B, 2 * mem if coverage else mem)
+    cov = torch.rand(3, B, N) * 3 * mask if coverage else None
     prev_tok, parent_tok, branch = torch.tensor([10, 2, 3, 4]), torch.tensor([10, 10, 1, 2]), torch.tensor([0, 1, 2, 1])
     with torch.inference_mode():
-        got = StackedDecoder(nets).step(words, mask, h_prev, ctx_prev, prev_tok, h_parent, parent_tok, branch)
+        got = StackedDecoder(nets).step(words, mask, h_prev, ctx_prev, prev_tok, h_parent, parent_tok, branch, cov)
+        assert (got[3] is None) == (not coverage)
         for e, net in enumerate(nets):
-            want = net.step({"words": words[e], "mask": mask}, h_prev[e], ctx_prev[e], prev_tok, h_parent[e], parent_tok, branch)
+            want = net.step({"words": words[e], "mask": mask}, h_prev[e], ctx_prev[e], prev_tok, h_parent[e], parent_tok,
+                            branch, None if cov is None else cov[e])
             for g, w in zip(got, want):
-                assert torch.allclose(g[e], w, atol=1e-5)
+                if w is not None:
+                    assert torch.allclose(g[e], w, atol=1e-5)
+        if coverage:  # each step adds its attention distribution: one unit, on the text's words only
+            added = got[3] - cov
+            assert torch.allclose(added.sum(-1), torch.ones(3, B), atol=1e-5) and bool((added[:, ~mask] == 0).all())
 
 
-@pytest.mark.parametrize("beam", [1, 3])
-def test_stacked_and_member_by_member_decoding_give_the_same_translations(beam, one_torch_thread):
+@pytest.mark.parametrize("beam,coverage", [(1, False), (3, False), (3, True)])
+def test_stacked_and_member_by_member_decoding_give_the_same_translations(beam, coverage, one_torch_thread):
     specs = load_corpus("highway")
-    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, ensemble=3)
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, ensemble=3, coverage=coverage)
     model = fit("highway", "ens", cfg, [(s.description, s.tree) for s in specs[:48]], seed=0)
     model.beam = beam
     texts = [s.description for s in specs[48:80]]
@@ -260,12 +287,16 @@ def test_beam_search_reports_the_networks_own_probabilities_and_mostly_beats_gre
     assert sum(gains) > 0 and sum(g > -1e-6 for g in gains) >= 0.75 * len(gains)
 
 
-def test_early_leaf_cost_grows_trees_and_reports_the_networks_own_probabilities(one_torch_thread):
+@pytest.mark.parametrize("coverage", [False, True])
+def test_early_leaf_cost_grows_trees_and_reports_the_networks_own_probabilities(coverage, one_torch_thread):
     """The cost changes which tree the beam keeps, not the probabilities it reports: a prohibitive
     cost fills every branch to the depth limit (15 tokens), a moderate one never shrinks the trees
-    on the whole, and the reported node probabilities stay the network's teacher-forced ones."""
+    on the whole, and the reported node probabilities stay the network's teacher-forced ones.
+    The grown trees also check the beam's reordering of every state, coverage included: a state
+    carried to the wrong hypothesis would report probabilities teacher forcing does not give
+    (the smoke model's own trees are single actions, where nothing is reordered)."""
     specs = load_corpus("highway")
-    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, beam=3)
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, beam=3, coverage=coverage)
     model = fit("highway", "one", cfg, [(s.description, s.tree) for s in specs[:48]], seed=0)
     texts = [s.description for s in specs[48:64]]
     size = lambda decoded: [len(to_tokens(t)) for t, _ in decoded]

@@ -166,6 +166,7 @@ def translation_experiment(
     md = summarize(out, command, "one CPU thread per training process (with --workers N, an ensemble's members train in N such "
                                  "processes: the same networks, less wall time); model seed = CV repeat index (ensemble member m: + m); "
                                  "augmentation/synthetic seed 0 (with member_draws, member m: seed m); "
+                                 "both shifted by a model's seed_offset where it has one; "
                                  "epochs, data and beam per model in nl2policy/language/models/config.py",
                    planned=[(d, name, protocol, 5 * repeats if protocol == "cv" else 4) for d, name, protocol, repeats in steps])
     console.print(md.read_text())

@@ -20,8 +20,9 @@ def training_pairs(domain: str, specs: Sequence[Spec], train_idx: Sequence[int],
                    seed: int = 0) -> list[tuple[str, Tree]]:
     pairs = [(specs[i].description, specs[i].tree) for i in train_idx]
     pairs += augment_fold(specs, train_idx, cfg.aug_copies, seed, swap=cfg.aug_swap)
-    if cfg.synthetic:
-        pairs += synthetic_pairs(domain, cfg.synthetic, seed, [specs[i].tree for i in train_idx], cfg.synth_per_tree)
+    if cfg.synthetic or cfg.mutants:
+        pairs += synthetic_pairs(domain, cfg.synthetic, seed, [specs[i].tree for i in train_idx], cfg.synth_per_tree,
+                                 cfg.mutants)
     return pairs
 
 
@@ -29,7 +30,9 @@ def member_pairs(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], c
                  seed: int = 0) -> Union[list[tuple[str, Tree]], Callable[[int], list[tuple[str, Tree]]]]:
     """What `train.fit` gets: one list for every member, or with `cfg.member_draws` a function
     giving member m its own draw (augmentation and synthetic pairs seeded seed + m; the real
-    descriptions are the same), so the ensemble's members also differ in what they read."""
+    descriptions are the same), so the ensemble's members also differ in what they read.
+    `cfg.seed_offset` shifts every draw (and train.fit every member's initial weights)."""
+    seed += cfg.seed_offset
     if not cfg.member_draws or cfg.ensemble == 1:
         return training_pairs(domain, specs, train_idx, cfg, seed)
     return lambda member: training_pairs(domain, specs, train_idx, cfg, seed + member)

@@ -110,6 +110,9 @@ class DecoderState:
         self.states[:, :, 0] = h0
         self.tokens = torch.full((B, MAX_STEPS + 1), self.nets[0].start_id, dtype=torch.long)
         self.ctx = h0.new_zeros(E, B, self.nets[0].out.in_features - h)
+        self.cov = None  # coverage configs: (E, B, N) attention each word has received
+        if model.cfg.coverage:
+            self.cov = torch.stack([net.initial_coverage(m) for net, m in zip(self.nets, self.memories)])
         self.t = 0
         self.stacked = None
         if model.cfg.encoder == "flat" and model.stack_members:
@@ -123,19 +126,23 @@ class DecoderState:
         h_prev, prev_tok = self.states[:, :, self.t], self.tokens[:, self.t]
         h_parent, parent_tok = self.states[:, rows, src], self.tokens[rows, src]
         if self.stacked is not None:
-            h, ctx, logits = self.stacked.step(self.words, self.memories[0]["mask"], h_prev, self.ctx, prev_tok,
-                                               h_parent, parent_tok, branch)
+            h, ctx, logits, cov = self.stacked.step(self.words, self.memories[0]["mask"], h_prev, self.ctx, prev_tok,
+                                                    h_parent, parent_tok, branch, self.cov)
         else:
-            out = [net.step(m, h_prev[e], self.ctx[e], prev_tok, h_parent[e], parent_tok, branch)
+            out = [net.step(m, h_prev[e], self.ctx[e], prev_tok, h_parent[e], parent_tok, branch,
+                            None if self.cov is None else self.cov[e])
                    for e, (net, m) in enumerate(zip(self.nets, self.memories))]
-            h, ctx, logits = (torch.stack(x) for x in zip(*out))
+            h, ctx, logits = (torch.stack(x) for x in list(zip(*out))[:3])
+            cov = None if self.cov is None else torch.stack([o[3] for o in out])
         self.states[:, :, self.t + 1] = h
-        self.ctx = ctx
+        self.ctx, self.cov = ctx, cov
         return logits
 
     def reorder(self, source: torch.Tensor) -> None:
         """Hypothesis i continues hypothesis source[i] (of the same description)."""
         self.states, self.tokens, self.ctx = self.states[:, source], self.tokens[source], self.ctx[:, source]
+        if self.cov is not None:
+            self.cov = self.cov[:, source]
 
     def push(self, chosen: torch.Tensor) -> None:
         self.t += 1

@@ -172,7 +172,7 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
         vocab_texts: Optional[Sequence[str]] = None, state: Optional[dict] = None,
         on_epoch: Optional[Callable[[dict], None]] = None, workers: int = 1) -> TrainedTranslator:
     """Train a translator on (description, tree) pairs: `cfg.ensemble` networks with seeds seed,
-    seed+1, ... `pairs` is one list for every member, or a function of the member index that
+    seed+1, ... (each plus `cfg.seed_offset`). `pairs` is one list for every member, or a function of the member index that
     gives each member its own draw (of augmented and synthetic pairs). The word vocabulary comes
     from `vocab_texts` (the real training descriptions) or the first member's pairs.
 
@@ -194,7 +194,7 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
 
     def train_member(member: int, report: Optional[Callable[[int, int], None]], save: Callable[[dict], None]) -> tuple[dict, list[float]]:
         nonlocal last_pairs, encoded, golds
-        torch.manual_seed(seed + member)  # the initial weights: a member is reproducible from its seed
+        torch.manual_seed(seed + cfg.seed_offset + member)  # the initial weights: a member is reproducible from its seed
         net = model.new_net()
         member_pairs = draw(member)
         if member_pairs is not last_pairs:
@@ -203,7 +203,7 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
             else:
                 golds = [gold_steps(tree, domain, names) for _, tree in member_pairs]
             last_pairs, encoded = member_pairs, [model.encode(t) for t, _ in member_pairs]
-        history = _fit_member(model, net, encoded, golds, len(names), seed + member, ckpt.partial.get(member), save, report)
+        history = _fit_member(model, net, encoded, golds, len(names), seed + cfg.seed_offset + member, ckpt.partial.get(member), save, report)
         return net.state_dict(), history
 
     todo = [m for m in range(cfg.ensemble) if m not in ckpt.finished]

@@ -12,6 +12,7 @@ from typing import Optional
 
 import torch
 import torch.nn as nn
+import torch.nn.functional as F
 from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
 
 from nl2policy.language.models.config import ModelConfig
@@ -81,6 +82,13 @@ class Translator(nn.Module):
             ctx_dim = 2 * mem
         else:
             ctx_dim = mem
+        if cfg.coverage:  # attention that knows what it has read (see attend)
+            if cfg.encoder != "flat":
+                raise ValueError("coverage is implemented for the flat encoder only")
+            self.cov_query = nn.Linear(h, mem, bias=False)
+            self.unread_query = nn.Linear(h, mem, bias=False)
+            self.unread_scale = nn.Parameter(torch.zeros(()))
+            ctx_dim = 2 * mem
         self.init = nn.Linear(mem, h)
         if cfg.decoder == "path":  # the path-conditioned node classifier (pathnet.py) reads the word states only
             self.path = PathDecoder(n_questions, n_tree_tokens, mem, h, cfg.dropout)
@@ -134,13 +142,28 @@ class Translator(nn.Module):
                 "sents": sent_states, "sent_mask": sent_mask,
                 "h0": torch.tanh(self.init(_masked_mean(sent_states, sent_mask)))}
 
-    def attend(self, memory: dict, h: torch.Tensor) -> torch.Tensor:
+    def attend(self, memory: dict, h: torch.Tensor, cov: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, Optional[torch.Tensor]]:
+        """The attention context for decoder state h, and the word attention it used (flat
+        encoder; None for the hierarchical one).
+
+        With coverage (`cov`: (B, N) attention each word has received so far), a read word
+        scores by a second query as well, and a second head reads what is still unread (its
+        score pays softplus(unread_scale) per unit of coverage). The errors this is for are
+        subtrees left out: under-translation, which coverage was made for in machine
+        translation (Tu et al., 2016, "Modeling Coverage for Neural Machine Translation")."""
         q = self.word_query(h)  # (B, mem)
         words = memory["words"]
         score = torch.einsum("bnd,bd->bn", words, q)
         if self.cfg.encoder == "flat":
+            if cov is not None:
+                score = score + cov * torch.einsum("bnd,bd->bn", words, self.cov_query(h))
             att = torch.softmax(score.masked_fill(~memory["mask"], -1e9), -1)
-            return torch.einsum("bn,bnd->bd", att, words)
+            ctx = torch.einsum("bn,bnd->bd", att, words)
+            if cov is not None:
+                unread = torch.einsum("bnd,bd->bn", words, self.unread_query(h)) - F.softplus(self.unread_scale) * cov
+                unread = torch.softmax(unread.masked_fill(~memory["mask"], -1e9), -1)
+                ctx = torch.cat([ctx, torch.einsum("bn,bnd->bd", unread, words)], -1)
+            return ctx, att
         # hierarchical: P(sentence) * P(word | sentence), normalised on the (sentence, word) grid
         B, S, W = memory["grid_index"].shape
         s_att = torch.softmax(torch.einsum("bsd,bd->bs", memory["sents"], q).masked_fill(~memory["sent_mask"], -1e9), -1)
@@ -148,31 +171,40 @@ class Translator(nn.Module):
         grid_att = torch.softmax(grid_score.masked_fill(~memory["word_mask"], -1e9), -1) * s_att[..., None]
         flat_att = torch.zeros(B, words.shape[1] + 1).scatter_add(1, memory["grid_index"].view(B, -1), grid_att.view(B, -1))
         return torch.cat([torch.einsum("bs,bsd->bd", s_att, memory["sents"]),
-                          torch.einsum("bn,bnd->bd", flat_att[:, :-1], words)], -1)
+                          torch.einsum("bn,bnd->bd", flat_att[:, :-1], words)], -1), None
 
     # ---- decoder -------------------------------------------------------------------------
     def step(self, memory: dict, h_prev: torch.Tensor, ctx_prev: torch.Tensor, prev_tok: torch.Tensor,
-             h_parent: torch.Tensor, parent_tok: torch.Tensor, branch: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+             h_parent: torch.Tensor, parent_tok: torch.Tensor, branch: torch.Tensor,
+             cov: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
         """One decoding step. Seq mode: the state runs on from the previous token only. Tree
         mode: it also takes the parent node's token and state and which branch (yes/no) this
         slot is, so each node is decoded knowing where in the tree it sits.
-        Returns (state, attention context, unmasked logits)."""
+        Returns (state, attention context, unmasked logits, coverage after this step; None
+        without coverage)."""
         if self.cfg.decoder == "seq":
             h_parent = torch.zeros_like(h_parent)
             parent_tok = torch.full_like(parent_tok, self.start_id)
             branch = torch.zeros_like(branch)
         inp = torch.cat([self.tok_emb(prev_tok), self.tok_emb(parent_tok), self.branch_emb(branch), h_parent, ctx_prev], -1)
         h = self.cell(self.drop(inp), h_prev)
-        ctx = self.attend(memory, h)
-        return h, ctx, self.logits(self.drop(torch.tanh(self.out(torch.cat([h, ctx], -1)))))
+        ctx, att = self.attend(memory, h, cov)
+        if cov is not None:
+            cov = cov + att
+        return h, ctx, self.logits(self.drop(torch.tanh(self.out(torch.cat([h, ctx], -1))))), cov
 
-    def run_step(self, memory: dict, hs: list, ctxs: list, toks: list, parent: torch.Tensor, branch: torch.Tensor):
+    def run_step(self, memory: dict, hs: list, ctxs: list, toks: list, parent: torch.Tensor, branch: torch.Tensor,
+                 cov: Optional[torch.Tensor] = None):
         """The next step given the states so far (hs[0] = h0, toks[0] = start); parent is the
         parent's step index (-1 for the root)."""
         rows = torch.arange(len(parent))
         H, T = torch.stack(hs, 1), torch.stack(toks, 1)
         src = parent + 1  # the root's parent is the start state
-        return self.step(memory, hs[-1], ctxs[-1], toks[-1], H[rows, src], T[rows, src], branch)
+        return self.step(memory, hs[-1], ctxs[-1], toks[-1], H[rows, src], T[rows, src], branch, cov)
+
+    def initial_coverage(self, memory: dict) -> Optional[torch.Tensor]:
+        """Zero coverage (B, N) for a coverage config, else None."""
+        return memory["mask"].new_zeros(memory["mask"].shape, dtype=torch.float) if self.cfg.coverage else None
 
     def loss(self, b: Batch, targets: torch.Tensor, parents: torch.Tensor, branches: torch.Tensor,
              masks: torch.Tensor, steps: torch.Tensor) -> torch.Tensor:
@@ -183,8 +215,9 @@ class Translator(nn.Module):
         hs, toks = [memory["h0"]], [torch.full((B,), self.start_id, dtype=torch.long)]
         ctxs = [torch.zeros(B, self.out.in_features - self.cfg.hidden)]
         total = torch.zeros(())
+        cov = self.initial_coverage(memory)
         for t in range(targets.shape[1]):
-            h, ctx, logits = self.run_step(memory, hs, ctxs, toks, parents[:, t], branches[:, t])
+            h, ctx, logits, cov = self.run_step(memory, hs, ctxs, toks, parents[:, t], branches[:, t], cov)
             hs.append(h)
             ctxs.append(ctx)
             toks.append(targets[:, t])
@@ -211,12 +244,18 @@ class StackedDecoder:
         self.w_query = stack(lambda n: n.word_query.weight).transpose(1, 2)
         self.w_out, self.b_out = stack(lambda n: n.out.weight).transpose(1, 2), stack(lambda n: n.out.bias)[:, None]
         self.w_logits, self.b_logits = stack(lambda n: n.logits.weight).transpose(1, 2), stack(lambda n: n.logits.bias)[:, None]
+        if self.cfg.coverage:
+            self.w_cov = stack(lambda n: n.cov_query.weight).transpose(1, 2)
+            self.w_unread = stack(lambda n: n.unread_query.weight).transpose(1, 2)
+            self.unread_scale = F.softplus(stack(lambda n: n.unread_scale))[:, None, None]
         self.start_id = nets[0].start_id
 
     def step(self, words: torch.Tensor, mask: torch.Tensor, h_prev: torch.Tensor, ctx_prev: torch.Tensor,
              prev_tok: torch.Tensor, h_parent: torch.Tensor, parent_tok: torch.Tensor,
-             branch: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """words (E, B, N, mem), mask (B, N), states (E, B, .), tokens (B,). Returns (h, ctx, logits), each (E, B, .)."""
+             branch: torch.Tensor, cov: Optional[torch.Tensor] = None
+             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
+        """words (E, B, N, mem), mask (B, N), states (E, B, .), tokens (B,), coverage (E, B, N)
+        or None. Returns (h, ctx, logits, coverage), each (E, B, .)."""
         if self.cfg.decoder == "seq":
             h_parent = torch.zeros_like(h_parent)
             parent_tok = torch.full_like(parent_tok, self.start_id)
@@ -227,6 +266,14 @@ class StackedDecoder:
         r, z = torch.sigmoid(gi[0] + gh[0]), torch.sigmoid(gi[1] + gh[1])
         h = (1 - z) * torch.tanh(gi[2] + r * gh[2]) + z * h_prev
         score = torch.einsum("ebnd,ebd->ebn", words, torch.bmm(h, self.w_query))
-        ctx = torch.einsum("ebn,ebnd->ebd", torch.softmax(score.masked_fill(~mask, -1e9), -1), words)
+        if cov is not None:
+            score = score + cov * torch.einsum("ebnd,ebd->ebn", words, torch.bmm(h, self.w_cov))
+        att = torch.softmax(score.masked_fill(~mask, -1e9), -1)
+        ctx = torch.einsum("ebn,ebnd->ebd", att, words)
+        if cov is not None:
+            unread = torch.einsum("ebnd,ebd->ebn", words, torch.bmm(h, self.w_unread)) - self.unread_scale * cov
+            unread = torch.softmax(unread.masked_fill(~mask, -1e9), -1)
+            ctx = torch.cat([ctx, torch.einsum("ebn,ebnd->ebd", unread, words)], -1)
+            cov = cov + att
         hidden = torch.tanh(torch.baddbmm(self.b_out, torch.cat([h, ctx], -1), self.w_out))
-        return h, ctx, torch.baddbmm(self.b_logits, hidden, self.w_logits)
+        return h, ctx, torch.baddbmm(self.b_logits, hidden, self.w_logits), cov
