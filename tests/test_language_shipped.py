@@ -26,10 +26,13 @@ def test_default_model_is_shipped(domain):
     assert path.stat().st_size < 6_000_000
     import torch
 
-    from nl2policy.language.models.config import MODELS
+    from nl2policy.language.models.config import MODELS, ModelConfig
 
     saved = torch.load(path, weights_only=False)["cfg"]
-    assert saved == MODELS[DEFAULT_MODEL].to_dict(), "the shipped model is stale: retrain it (see its README)"
+    # read as load_model reads it: a config field added after the file was saved takes its
+    # default, which by design is the behaviour from before the field existed
+    assert set(saved) <= set(MODELS[DEFAULT_MODEL].to_dict()), "the shipped model has fields this version lacks"
+    assert ModelConfig(**saved) == MODELS[DEFAULT_MODEL], "the shipped model is stale: retrain it (see its README)"
 
 
 @pytest.mark.parametrize("domain", DOMAINS)
