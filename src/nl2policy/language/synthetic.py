@@ -16,7 +16,7 @@ most often asks for.
 from __future__ import annotations
 
 import random
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 from nl2policy.domains import get_domain
 from nl2policy.language.augment import TEXTING
@@ -44,7 +44,7 @@ Path = tuple[bool, ...]
 """Where a subtree sits: the answers (True = yes) that lead to it from the root."""
 
 
-def _subtrees(tree: Tree, path: Path = (), above: tuple[str, ...] = ()):
+def _subtrees(tree: Tree, path: Path = (), above: tuple[str, ...] = ()) -> Iterator[tuple[Path, Tree, tuple[str, ...]]]:
     """(path, subtree, questions above it) for every node and leaf, in pre-order."""
     yield path, tree, above
     if isinstance(tree, Node):
