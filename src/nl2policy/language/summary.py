@@ -291,8 +291,8 @@ def _variants(runs: list[dict], kinds: dict[str, str], base: str = DEFAULT_MODEL
 
 def is_rerun(name: str, base: str = DEFAULT_MODEL) -> bool:
     """Whether `name` is `base` with other seeds only (ModelConfig.seed_offset)."""
-    cfg = MODELS.get(name)
-    return cfg is not None and name != base and cfg.seed_offset != 0 and replace(cfg, seed_offset=MODELS[base].seed_offset) == MODELS[base]
+    cfg, ref = MODELS.get(name), MODELS[base]
+    return cfg is not None and cfg.seed_offset != ref.seed_offset and replace(cfg, seed_offset=ref.seed_offset) == ref
 
 
 

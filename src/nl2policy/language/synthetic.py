@@ -21,7 +21,8 @@ from typing import Callable, Iterator, Sequence
 from nl2policy.domains import get_domain
 from nl2policy.language.augment import TEXTING
 from nl2policy.language.phrases import ACTIONS, ASIDES, FILLER, QUESTIONS, REASONS, SUMMARIES, UNUSED_ACTIONS
-from nl2policy.trees import MAX_DEPTH, Leaf, Node, Tree, Vocabulary, to_tokens
+from nl2policy.trees import MAX_DEPTH, Leaf, Node, Tree, TreeError, Vocabulary, to_tokens
+from nl2policy.trees.parse import validate
 from nl2policy.trees.tree import questions_used
 
 LEAF_PROB = (0.0, 0.35, 0.55, 1.0)
@@ -60,11 +61,6 @@ def _replace(tree: Tree, path: Path, new: Tree) -> Tree:
     return Node(tree.question, tree.yes, _replace(tree.no, path[1:], new))
 
 
-def _distinct_branches(tree: Tree) -> bool:
-    """No question whose two answers lead to the same subtree (the random generator's rule too)."""
-    return isinstance(tree, Leaf) or (tree.yes != tree.no and _distinct_branches(tree.yes) and _distinct_branches(tree.no))
-
-
 def mutate(tree: Tree, vocab: Vocabulary, rng: random.Random) -> Tree:
     """A valid tree one edit away from `tree`: an action grown into a new question (with random
     subtrees), a question cut back to one action, or one action or question relabelled.
@@ -93,7 +89,11 @@ def mutate(tree: Tree, vocab: Vocabulary, rng: random.Random) -> Tree:
         else:
             continue
         out = _replace(tree, path, new)
-        if out != tree and _distinct_branches(out):
+        try:  # the tree rules (e.g. a cut or relabel may leave a question with identical branches)
+            validate(out, vocab)
+        except TreeError:
+            continue
+        if out != tree:
             return out
     raise ValueError("no valid one-edit mutant found")
 
