@@ -100,6 +100,35 @@ def test_summary_pools_confidence_calibration_over_folds(tmp_path):
     assert "| taxi | m | cv | 50.0 | 80.0 | 20.0 |" in md  # 10 of 20 confident, 8/10 right; 2/10 unsure right
 
 
+def test_unseen_trees_are_the_test_trees_no_training_description_has():
+    from nl2policy.language.corpus import load_corpus
+    from nl2policy.language.evaluate import unseen_trees
+    from nl2policy.trees import to_tokens
+
+    specs = load_corpus("taxi")
+    key = lambda i: tuple(to_tokens(specs[i].tree))
+    repeated = next(i for i in range(len(specs)) if any(key(j) == key(i) for j in range(len(specs)) if j != i))
+    twin = next(j for j in range(len(specs)) if j != repeated and key(j) == key(repeated))
+    single = next(i for i in range(len(specs)) if all(key(j) != key(i) for j in range(len(specs)) if j != i))
+    rest = [i for i in range(len(specs)) if i not in (repeated, twin, single)]
+    assert unseen_trees(specs, rest + [twin], [repeated, single]) == [False, True]
+    assert unseen_trees(specs, [i for i in rest if key(i) != key(repeated)], [repeated, twin]) == [True, True]
+
+
+def test_summary_counts_unseen_test_trees_and_pools_accuracy_on_them(tmp_path):
+    a = dict(_run("taxi", "m", "cv-r0-f0", "cv", 0.8), n=10, unseen=4, unseen_right=2)  # 8 right: 2 unseen, 6 seen
+    b = dict(_run("taxi", "m", "cv-r0-f1", "cv", 0.5), n=10, unseen=2, unseen_right=0)  # 5 right, all seen
+    c = _run("taxi", "old", "cv-r0-f0", "cv", 0.5)  # a fold from before the record: only in the data table
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in (a, b, c)))
+    md = summarize(tmp_path, "cmd", "budget").read_text()
+    assert "| taxi | m | cv | 2 | 6 | 33.3 | 78.6 |" in md  # 2 of 6 unseen right; 11 of 14 seen
+    assert "| taxi | old |" not in md.split("acc on unseen")[1]
+    import re
+
+    counts = re.search(r"\| taxi \| cv \| 600 \| (\d+) \| ([\d.]+) \|", md)  # the corpus's 3 x 200 CV tests alone
+    assert counts and 0 < int(counts[1]) < 600 and float(counts[2]) == round(100 * int(counts[1]) / 600, 1)
+
+
 def test_fold_result_counts_confident_and_unsure_translations(monkeypatch, one_torch_thread):
     import dataclasses
 
@@ -114,6 +143,8 @@ def test_fold_result_counts_confident_and_unsure_translations(monkeypatch, one_t
     assert 0 <= r["confident"] <= r["n"] == 10
     assert r["confident_right"] + r["unsure_right"] == round(r["tree_acc"] * 10)
     assert r["confident_right"] <= r["confident"]
+    assert r["unseen"] == sum(evaluate.unseen_trees(specs, list(range(30)), list(range(30, 40))))
+    assert r["unseen_right"] <= min(r["unseen"], round(r["tree_acc"] * 10))
 
 
 def test_summary_sets_each_decoding_choice_beside_the_same_folds_without_it(tmp_path):
@@ -178,7 +209,7 @@ def test_summary_sets_each_variant_of_the_default_beside_it_on_the_folds_both_ra
     # a fold the default ran on one kind of CPU and the variant on another: two training runs, not a pair
     runs += [_run("taxi", base, "cv-r0-f1", "cv", 0.5), dict(_run("taxi", base + "-x", "cv-r0-f1", "cv", 0.0), machine="other cpu")]
     (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
-    part = summarize(tmp_path, "cmd", "budget").read_text().split("## Variants")[1]
+    part = summarize(tmp_path, "cmd", "budget").read_text().split("## Variants")[1].split("\n## ")[0]
     assert f"| taxi | {base}-x | cv | 1 | 75.00 | 50.00 | 1 / 0 |" in part
     assert f"| taxi | {base}-more | cv | 1 | 25.00 | 100.00 | 0 / 1 |" in part
     assert f"| taxi | {base}-again | cv | 1 | 75.00 | 100.00 | 0 / 1 |" in part

@@ -23,7 +23,7 @@ from nl2policy.language.models.config import MODELS
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.train import fit
 from nl2policy.language.translate import LOW_CONFIDENCE, tree_probability
-from nl2policy.trees import GRID_SLOTS, Tree, TreeError, to_grid
+from nl2policy.trees import GRID_SLOTS, Tree, TreeError, to_grid, to_tokens
 from nl2policy.trees.parse import validate
 
 # decoding choices a fold also scores dialled down to a smaller value (same trained networks) when
@@ -60,6 +60,13 @@ def score(domain: str, preds: Sequence[Tree], golds: Sequence[Tree]) -> dict:
             "policy_acc": sum(d.same_policy(p, g) for p, g in zip(preds, golds)) / n}
 
 
+def unseen_trees(specs: Sequence[Spec], train_idx: Sequence[int], test_idx: Sequence[int]) -> list[bool]:
+    """For each test description: is its tree absent from every training description? Such a
+    tree has to be composed from parts seen elsewhere, which is where translators fail most."""
+    seen = {tuple(to_tokens(specs[i].tree)) for i in train_idx}
+    return [tuple(to_tokens(specs[i].tree)) not in seen for i in test_idx]
+
+
 def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_idx: Sequence[int], name: str,
              seed: int, cache: MiniLMCache, workers: int = 1) -> dict:
     start = time.time()
@@ -77,6 +84,8 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     right = [p == g for p, g in zip(preds, golds)]
     result.update(confident=sum(sure), confident_right=sum(s and r for s, r in zip(sure, right)),
                   unsure_right=sum(r and not s for s, r in zip(sure, right)))
+    unseen = unseen_trees(specs, train_idx, test_idx)
+    result.update(unseen=sum(unseen), unseen_right=sum(u and r for u, r in zip(unseen, right)))
     # the same networks on the same fold, decoded with less of each decoding choice the config makes
     for key, (attr, off, _) in DECODING_ALTERNATIVES.items():
         if getattr(model.cfg, attr) > off:

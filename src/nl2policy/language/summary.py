@@ -13,7 +13,8 @@ from pathlib import Path
 from statistics import mean, pstdev
 from typing import Sequence
 
-from nl2policy.language.evaluate import DECODING_ALTERNATIVES, held_out_writers, read_runs
+from nl2policy.language.corpus import load_corpus
+from nl2policy.language.evaluate import DECODING_ALTERNATIVES, held_out_writers, plan_folds, read_runs, unseen_trees
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
 from nl2policy.language.translate import LOW_CONFIDENCE
 
@@ -159,6 +160,7 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
     lines += _decoding_effects(runs)
     lines += _variants(runs, kinds)
     lines += _calibration(runs)
+    lines += _unseen(runs, sorted({r["domain"] for r in rows}))
     missing = [f"{d} {m} {p}: {want - len(table.get((d, m, p), []))} of {want} folds"
                for d, m, p, want in planned if len(table.get((d, m, p), [])) < want]
     if missing:
@@ -284,8 +286,9 @@ def _variants(runs: list[dict], kinds: dict[str, str], base: str = DEFAULT_MODEL
     reruns = sorted({m for _, m, _ in rows if is_rerun(m, base)})
     if reruns:
         lines += ["", f"{', '.join(reruns)}: the default's own recipe trained again with other seeds (initial weights and "
-                  "draws of augmented and synthetic pairs), not a change to it. Its distance from the default is what a "
-                  "second training run alone moves, the yardstick for the other rows."]
+                  "draws of augmented and synthetic pairs), not a change to it. "
+                  + ("Its distance" if len(reruns) == 1 else "Their distance") + " from the default is what "
+                  "another training run alone moves, the yardstick for the other rows."]
     return lines
 
 
@@ -337,6 +340,32 @@ def _calibration(runs: list[dict]) -> list[str]:
                      f"{pct(sum(r['unsure_right'] for r in rs), n - sure)} |")
     return lines
 
+
+
+def _unseen(runs: list[dict], domains: list[str]) -> list[str]:
+    """How many test descriptions have a tree that no training description has (from the folds
+    alone, no model), and, for the folds that record it, each model's accuracy on those and on
+    the rest. Whether a model can compose a tree it never saw decides most of what it misses."""
+    lines = ["", "## Trees no training description has", "",
+             "Test descriptions whose tree no description of their training fold has (the folds of 3 CV repeats, "
+             "and of leave-writers-out):", "", "| domain | protocol | test descriptions | tree unseen in training | share (%) |",
+             "|---|---|---:|---:|---:|"]
+    for domain in domains:
+        specs = load_corpus(domain)
+        for protocol, repeats in (("cv", 3), ("writers", 1)):
+            flags = [u for _, tr, te in plan_folds(specs, protocol, repeats) for u in unseen_trees(specs, tr, te)]
+            lines.append(f"| {domain} | {protocol} | {len(flags)} | {sum(flags)} | {100 * sum(flags) / len(flags):.1f} |")
+    recorded = [r for r in runs if "unseen" in r]
+    if recorded:
+        lines += ["", "Tree accuracy (%) on those and on the rest, test descriptions pooled over the folds that record it:", "",
+                  "| domain | model | protocol | folds | unseen trees | acc on unseen | acc on seen |", "|---|---|---|---:|---:|---:|---:|"]
+        pct = lambda a, b: f"{100 * a / b:.1f}" if b else "-"
+        for (domain, model, protocol), rs in sorted(_by_row(recorded).items()):
+            n, unseen = sum(r["n"] for r in rs), sum(r["unseen"] for r in rs)
+            right, unseen_right = round(sum(r["tree_acc"] * r["n"] for r in rs)), sum(r["unseen_right"] for r in rs)
+            lines.append(f"| {domain} | {model} | {protocol} | {len(rs)} | {unseen} | {pct(unseen_right, unseen)} | "
+                         f"{pct(right - unseen_right, n - unseen)} |")
+    return lines
 
 
 def _figure(rows: list[dict], path: Path) -> None:

