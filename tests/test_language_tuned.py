@@ -6,11 +6,11 @@ import math
 import pytest
 import torch
 
+from nl2policy.domains import get_domain
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.models.config import MODELS
 from nl2policy.language.text import WordVocab
 from nl2policy.language.train import TrainedTranslator, _cosine_lr, collate, fit
-from nl2policy.domains import get_domain
 from nl2policy.trees.parse import validate
 
 

@@ -184,6 +184,7 @@ def _machine_cell(counts: dict[str, int], labels: dict[str, str]) -> str:
 
 
 PAPER_FOLDS = 15
+CV_REPEATS = PAPER_FOLDS // 5  # the paper's protocol: 5-fold CV, repeated
 """The paper's protocol: 5-fold cross-validation repeated 3 times."""
 
 
@@ -324,6 +325,11 @@ def _writer_breakdown(runs: list[dict]) -> list[str]:
 
 
 
+def _pct(part: int, whole: int) -> str:
+    """A share of a pooled count, in percent, or "-" when there is nothing to share."""
+    return f"{100 * part / whole:.1f}" if whole else "-"
+
+
 def _calibration(runs: list[dict]) -> list[str]:
     """Pooled over folds: how many translations are confident, and how often each kind is right.
     A useful confidence makes the confident ones right far more often than the unsure ones."""
@@ -333,11 +339,10 @@ def _calibration(runs: list[dict]) -> list[str]:
     lines = ["", f"Confidence (test descriptions pooled over folds; confident = node-probability product >= {LOW_CONFIDENCE}):", "",
              "| domain | model | protocol | confident share | tree acc when confident | tree acc when unsure |",
              "|---|---|---|---:|---:|---:|"]
-    pct = lambda a, b: f"{100 * a / b:.1f}" if b else "-"
     for (domain, model, protocol), rs in sorted(_by_row(runs).items()):
         n, sure = sum(r["n"] for r in rs), sum(r["confident"] for r in rs)
-        lines.append(f"| {domain} | {model} | {protocol} | {pct(sure, n)} | {pct(sum(r['confident_right'] for r in rs), sure)} | "
-                     f"{pct(sum(r['unsure_right'] for r in rs), n - sure)} |")
+        lines.append(f"| {domain} | {model} | {protocol} | {_pct(sure, n)} | {_pct(sum(r['confident_right'] for r in rs), sure)} | "
+                     f"{_pct(sum(r['unsure_right'] for r in rs), n - sure)} |")
     return lines
 
 
@@ -347,24 +352,23 @@ def _unseen(runs: list[dict], domains: list[str]) -> list[str]:
     alone, no model), and, for the folds that record it, each model's accuracy on those and on
     the rest. Whether a model can compose a tree it never saw decides most of what it misses."""
     lines = ["", "## Trees no training description has", "",
-             "Test descriptions whose tree no description of their training fold has (the folds of 3 CV repeats, "
-             "and of leave-writers-out):", "", "| domain | protocol | test descriptions | tree unseen in training | share (%) |",
+             f"Test descriptions whose tree no description of their training fold has (the folds of {CV_REPEATS} CV "
+             "repeats, and of leave-writers-out):", "", "| domain | protocol | test descriptions | tree unseen in training | share (%) |",
              "|---|---|---:|---:|---:|"]
     for domain in domains:
         specs = load_corpus(domain)
-        for protocol, repeats in (("cv", 3), ("writers", 1)):
+        for protocol, repeats in (("cv", CV_REPEATS), ("writers", 1)):
             flags = [u for _, tr, te in plan_folds(specs, protocol, repeats) for u in unseen_trees(specs, tr, te)]
             lines.append(f"| {domain} | {protocol} | {len(flags)} | {sum(flags)} | {100 * sum(flags) / len(flags):.1f} |")
     recorded = [r for r in runs if "unseen" in r]
     if recorded:
         lines += ["", "Tree accuracy (%) on those and on the rest, test descriptions pooled over the folds that record it:", "",
                   "| domain | model | protocol | folds | unseen trees | acc on unseen | acc on seen |", "|---|---|---|---:|---:|---:|---:|"]
-        pct = lambda a, b: f"{100 * a / b:.1f}" if b else "-"
         for (domain, model, protocol), rs in sorted(_by_row(recorded).items()):
             n, unseen = sum(r["n"] for r in rs), sum(r["unseen"] for r in rs)
             right, unseen_right = round(sum(r["tree_acc"] * r["n"] for r in rs)), sum(r["unseen_right"] for r in rs)
-            lines.append(f"| {domain} | {model} | {protocol} | {len(rs)} | {unseen} | {pct(unseen_right, unseen)} | "
-                         f"{pct(right - unseen_right, n - unseen)} |")
+            lines.append(f"| {domain} | {model} | {protocol} | {len(rs)} | {unseen} | {_pct(unseen_right, unseen)} | "
+                         f"{_pct(right - unseen_right, n - unseen)} |")
     return lines
 
 

@@ -240,10 +240,11 @@ def _fit_member(model: "TrainedTranslator", net: Translator, encoded: list[Encod
     states after each."""
     cfg = model.cfg
     rng = random.Random(seed)
-    tuned = {id(p) for p in net.mini_top.parameters()} if cfg.minilm_tune else set()
-    groups = [{"params": [p for p in net.parameters() if id(p) not in tuned], "lr": cfg.lr}]
+    tuned = list(net.mini_top.parameters()) if cfg.minilm_tune else []
+    tuned_ids = {id(p) for p in tuned}
+    groups = [{"params": [p for p in net.parameters() if id(p) not in tuned_ids], "lr": cfg.lr}]
     if tuned:  # pretrained layers: their own, smaller rate
-        groups.append({"params": list(net.mini_top.parameters()), "lr": cfg.minilm_lr})
+        groups.append({"params": tuned, "lr": cfg.minilm_lr})
     peaks = [group["lr"] for group in groups]
     opt = torch.optim.Adam(groups)
     start_epoch, history = 0, []
