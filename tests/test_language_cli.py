@@ -109,3 +109,15 @@ def test_a_tree_that_never_takes_a_named_action_is_flagged(home, monkeypatch):
         "the description says to drive to the city (go_city), but the tree never does: check where it should"]
     plain = tr.translate("taxi", "With a passenger drive to the airport, otherwise drive to the village.", "smoke")
     assert plain.warnings == []
+
+
+def test_a_tree_that_never_asks_a_question_the_text_asks_is_flagged(home, monkeypatch):
+    """The warning names each question the text asks and the tree never does (mentions.py)."""
+    vocab = get_domain("taxi").vocab
+    habit = parse_tree({"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_city"}}, vocab)
+    loaded = tr.get_model("taxi", "smoke")
+    monkeypatch.setattr(loaded.translator, "predict", lambda texts: [(habit, {0: 0.9, 1: 0.9, 2: 0.9})])
+    said = tr.translate("taxi", "With a passenger drive to the airport. If you are in the city, wait; "
+                                "otherwise drive to the city.", "smoke")
+    assert [w for w in said.warnings if "never does" in w] == [
+        'the description asks "is the taxi in the city?" (at_city), but the tree never does: check where it should']

@@ -1,4 +1,5 @@
-"""The actions a description names, and the decoder's mention check that uses them."""
+"""The actions a description names and the questions it asks, and the decoder's mention checks
+that use them."""
 
 import dataclasses
 
@@ -6,10 +7,11 @@ import pytest
 
 from nl2policy.domains import get_domain
 from nl2policy.language.corpus import load_corpus
-from nl2policy.language.mentions import named_actions, unmet_mentions
+from nl2policy.language.mentions import named_actions, named_questions, unasked_questions, unmet_mentions
 from nl2policy.language.models.config import MODELS
 from nl2policy.language.train import fit
 from nl2policy.trees import parse_tree
+from nl2policy.trees.tree import questions_used
 from test_language_train import _assert_teacher_forced
 
 
@@ -67,4 +69,60 @@ def test_mention_check_never_leaves_more_named_actions_out_and_keeps_the_probabi
     for text, (tree, probs) in changed:
         _assert_teacher_forced(model, text, tree, probs)
     model.mention_cost = None
+    assert model.predict(texts) == plain
+
+
+@pytest.mark.parametrize("text, questions", [
+    ("If it is already in the city, wait there; if not, drive to the city.", {"at_city"}),
+    ("Sitting at the airport? Drive to the city.", {"at_airport"}),
+    ("if inVillage:\n   if the wait is long: drive to city", {"at_village", "long_wait"}),
+    ("First, check whether it has a passenger. No passenger: if the traffic is heavy, go to the village.",
+     {"has_passenger", "heavy_traffic"}),
+    ("if ur carrying someone drive to the airport", {"has_passenger"}),
+    # places, waits and traffic named in passing, not asked about
+    ("Drive to the city, where there are always passengers; the traffic plays no part.", set()),
+    ("It waits in the city for a passenger, since the village can have a long wait.", set()),
+])
+def test_taxi_questions_a_text_asks(text, questions):
+    assert named_questions("taxi", text) == questions
+
+
+def test_unasked_questions_are_the_asked_questions_the_tree_never_asks():
+    vocab = get_domain("taxi").vocab
+    tree = parse_tree({"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_city"}}, vocab)
+    text = "With a passenger, drive to the airport. If you're already in the city, wait; if not, drive to the city."
+    assert unasked_questions("taxi", text, tree) == {"at_city"}
+    assert unasked_questions("taxi", "Got a passenger? Drive to the airport.", tree) == set()
+    assert named_questions("highway", "If the left lane is free, move left.") == set()  # no patterns yet
+
+
+def test_writers_trees_almost_always_ask_every_question_their_text_asks():
+    """The precision the question check rests on (mentions.py's docstring): a question the patterns
+    find is missing from the writer's own tree in at most 4 of 200 taxi descriptions, while they find
+    at least 70% of the questions the trees ask."""
+    specs = load_corpus("taxi")
+    assert sum(bool(unasked_questions("taxi", s.description, s.tree)) for s in specs) <= 4
+    asked = [(q, s) for s in specs for q in questions_used(s.tree)]
+    assert sum(q in named_questions("taxi", s.description) for q, s in asked) >= 0.7 * len(asked)
+
+
+def test_question_check_never_leaves_more_asked_questions_out_and_keeps_the_probabilities(one_torch_thread):
+    """Like the action check: with a prohibitive cost no text ends with more unasked questions than
+    plain decoding leaves, some end with fewer, a changed choice reports that tree's own node
+    probabilities, and no cost gives plain decoding back."""
+    specs = load_corpus("taxi")
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=2, batch=16, beam=4)
+    model = fit("taxi", "one", cfg, [(s.description, s.tree) for s in specs[:40]], seed=0)
+    texts = [s.description for s in specs[40:80]]
+    unasked = lambda decoded: [len(unasked_questions("taxi", x, t)) for x, (t, _) in zip(texts, decoded)]
+    plain = model.predict(texts)
+    model.question_cost = 100.0
+    checked = model.predict(texts)
+    assert all(c <= p for c, p in zip(unasked(checked), unasked(plain)))
+    assert sum(unasked(checked)) < sum(unasked(plain))
+    changed = [(x, c) for x, c, p in zip(texts, checked, plain) if c[0] != p[0]]
+    assert changed
+    for text, (tree, probs) in changed:
+        _assert_teacher_forced(model, text, tree, probs)
+    model.question_cost = None
     assert model.predict(texts) == plain

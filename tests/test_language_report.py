@@ -136,6 +136,7 @@ def test_fold_result_counts_confident_and_unsure_translations(monkeypatch, one_t
     from nl2policy.language.corpus import load_corpus
     from nl2policy.language.models.config import MODELS
     from nl2policy.language.models.pretrained import MiniLMCache
+    from nl2policy.trees import to_tokens
 
     monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=2))
     specs = load_corpus("taxi")[:40]
@@ -145,6 +146,10 @@ def test_fold_result_counts_confident_and_unsure_translations(monkeypatch, one_t
     assert r["confident_right"] <= r["confident"]
     assert r["unseen"] == sum(evaluate.unseen_trees(specs, list(range(30)), list(range(30, 40))))
     assert r["unseen_right"] <= min(r["unseen"], round(r["tree_acc"] * 10))
+    assert len(r["errors"]) == 10 - round(r["tree_acc"] * 10)  # each wrong translation, to read back later
+    ids = {s.id: s for s in specs[30:]}
+    for sid, tokens in r["errors"]:
+        assert " ".join(to_tokens(ids[sid].tree)) != tokens
 
 
 def test_summary_sets_each_decoding_choice_beside_the_same_folds_without_it(tmp_path):
@@ -172,6 +177,7 @@ def test_fold_result_with_a_beam_and_decoding_costs_also_records_decoding_withou
     from nl2policy.language.corpus import load_corpus
     from nl2policy.language.models.config import MODELS
     from nl2policy.language.models.pretrained import MiniLMCache
+    from nl2policy.trees import to_tokens
 
     monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=2, beam=3, leaf_cost=100.0,
                                                             mention_cost=100.0))

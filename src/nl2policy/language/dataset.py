@@ -1,8 +1,9 @@
 """What a translator trains on: one place that assembles a fold's training pairs.
 
 The real descriptions of the training indices, then (as the model config asks) their augmented
-copies and the synthetic pairs. Only `train_idx` is ever read, so the cross-validation folds
-and the final model (all indices) are built the same way.
+copies, the synthetic pairs and the other domains' descriptions by the same writers. Only
+`train_idx` is ever read, so the cross-validation folds and the final model (all indices) are
+built the same way.
 """
 
 from __future__ import annotations
@@ -10,7 +11,8 @@ from __future__ import annotations
 from typing import Callable, Sequence, Union
 
 from nl2policy.language.augment import augment_fold
-from nl2policy.language.corpus import Spec
+from nl2policy.domains import DOMAINS
+from nl2policy.language.corpus import Spec, load_corpus
 from nl2policy.language.models.config import ModelConfig
 from nl2policy.language.synthetic import synthetic_pairs
 from nl2policy.trees import Tree
@@ -23,7 +25,26 @@ def training_pairs(domain: str, specs: Sequence[Spec], train_idx: Sequence[int],
     if cfg.synthetic or cfg.mutants:
         pairs += synthetic_pairs(domain, cfg.synthetic, seed, [specs[i].tree for i in train_idx], cfg.synth_per_tree,
                                  cfg.mutants)
+    if cfg.other_domains:
+        pairs += borrowed_pairs(domain, {specs[i].writer for i in train_idx}, cfg.aug_copies, seed)
     return pairs
+
+
+def borrowed_pairs(domain: str, writers: set[str], aug_copies: int, seed: int = 0) -> list[tuple[str, Tree]]:
+    """The other domains' real descriptions by `writers` (those of the training fold), each with
+    `aug_copies` augmented copies. Their trees use other questions and actions, but the way a
+    writer composes a policy ("check X; if so ... otherwise ...", numbered steps, pseudo-code)
+    is the same in every domain: twice the real text to learn it from. Writers outside the
+    training fold are left out, so leave-writers-out still meets its writers for the first time."""
+    out: list[tuple[str, Tree]] = []
+    for other in DOMAINS:
+        if other == domain:
+            continue
+        specs = load_corpus(other)
+        idx = [i for i, s in enumerate(specs) if s.writer in writers]
+        out += [(specs[i].description, specs[i].tree) for i in idx]
+        out += augment_fold(specs, idx, aug_copies, seed)
+    return out
 
 
 def member_pairs(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], cfg: ModelConfig,

@@ -15,7 +15,7 @@ import torch
 
 from nl2policy.domains import get_domain
 from nl2policy.language.grammar import allowed_tokens, next_slot
-from nl2policy.language.mentions import named_actions, unmet_mentions
+from nl2policy.language.mentions import named_actions, named_questions, unasked_questions, unmet_mentions
 from nl2policy.language.models.network import Batch, StackedDecoder
 from nl2policy.trees import Tree, from_tokens
 
@@ -33,13 +33,15 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
     offsets that sum's pull towards small trees (the reported probabilities stay the
     model's own). With a `mention_cost`, the final choice among the beam's hypotheses also
     pays that many nats for each action the text names (language/mentions.py) that the tree
-    never takes."""
+    never takes, and with a `question_cost`, that many for each question the text asks that the
+    tree never does."""
     vocab = get_domain(model.domain).vocab
     names = model.tree_tokens
     index = {t: i for i, t in enumerate(names)}
     is_action = torch.tensor([t in vocab.actions for t in names])
     leaf_cost = model.cfg.leaf_cost if model.leaf_cost is None else model.leaf_cost
     mention_cost = model.cfg.mention_cost if model.mention_cost is None else model.mention_cost
+    question_cost = model.cfg.question_cost if model.question_cost is None else model.question_cost
     B, K = len(texts), max(1, model.beam or model.cfg.beam)
     state = DecoderState(model, batch, copies=K)
     prefixes: list[list[str]] = [[] for _ in range(B * K)]
@@ -87,6 +89,12 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
             for k in range(K):
                 if named and trees[b * K + k] is not None:
                     score[b, k] -= mention_cost * len(unmet_mentions(model.domain, text, trees[b * K + k], named))
+    if question_cost:
+        for b, text in enumerate(texts):
+            asked = named_questions(model.domain, text)
+            for k in range(K):
+                if asked and trees[b * K + k] is not None:
+                    score[b, k] -= question_cost * len(unasked_questions(model.domain, text, trees[b * K + k], asked))
     top = score.argmax(-1)  # beams stay sorted, but finished ones may have been overtaken
     return [(trees[b * K + int(k)], probs[b * K + int(k)]) for b, k in enumerate(top)]
 

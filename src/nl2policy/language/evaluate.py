@@ -32,6 +32,7 @@ from nl2policy.trees.parse import validate
 DECODING_ALTERNATIVES = {"greedy_tree_acc": ("beam", 1, "greedy (beam of 1)"),
                          "no_leaf_cost_tree_acc": ("leaf_cost", 0.0, "no early-leaf cost"),
                          "no_mention_cost_tree_acc": ("mention_cost", 0.0, "no action-mention check"),
+                         "no_question_cost_tree_acc": ("question_cost", 0.0, "no question-mention check"),
                          "first_3_members_tree_acc": ("ensemble", 3, "its first 3 members"),
                          "first_4_members_tree_acc": ("ensemble", 4, "its first 4 members"),
                          "first_5_members_tree_acc": ("ensemble", 5, "its first 5 members")}
@@ -86,6 +87,8 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
                   unsure_right=sum(r and not s for s, r in zip(sure, right)))
     unseen = unseen_trees(specs, train_idx, test_idx)
     result.update(unseen=sum(unseen), unseen_right=sum(u and r for u, r in zip(unseen, right)))
+    # what went wrong, for error analysis without retraining: (spec id, the predicted tree's tokens)
+    result["errors"] = [[specs[i].id, " ".join(to_tokens(p))] for i, p, r in zip(test_idx, preds, right) if not r]
     # the same networks on the same fold, decoded with less of each decoding choice the config makes
     for key, (attr, off, _) in DECODING_ALTERNATIVES.items():
         if getattr(model.cfg, attr) > off:

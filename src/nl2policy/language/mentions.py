@@ -1,5 +1,6 @@
 """The actions a description names, found by patterns: "drive to the city", "-> airport",
-"speed up", "move to the left lane".
+"speed up", "move to the left lane"; and the questions it asks: "if it is in the city",
+"whether it has a passenger", "if the wait there is long".
 
 Two uses. Counterfactual augmentation (counterfactual.py) rewrites the mentions it finds. The
 decoder's mention check (train.py) prefers, among its final hypotheses, a tree that does every
@@ -8,6 +9,15 @@ The patterns are built for precision, not recall: on the corpus, an action they 
 from the writer's own tree in 1 of 197 taxi and 3 of 195 highway descriptions (tests check this),
 while a tree's action they do not find is common (phrasings they do not know), so only the first
 direction is used as evidence.
+
+The question patterns (taxi only, so far) serve the same check for the questions: a text that
+asks "if it is already in the city" and a tree that never asks at_city are at odds. A question is
+only seen where a condition asks it ("if/whether/when/unless/once ... in the city", "in the
+city?", "not in the city", a code-style `inCity`), because descriptions also name places,
+traffic and waits in passing ("the city always has passengers", "the traffic plays no part").
+They were written reading the corpus, like the action patterns: a question they find is missing
+from the writer's own tree in 4 of 200 taxi descriptions (a test checks this), and they find
+about three in four of the questions the trees ask.
 """
 
 from __future__ import annotations
@@ -17,7 +27,7 @@ from dataclasses import dataclass
 from typing import Optional
 
 from nl2policy.trees import Tree
-from nl2policy.trees.tree import iter_leaves
+from nl2policy.trees.tree import iter_leaves, questions_used
 
 
 @dataclass(frozen=True)
@@ -89,3 +99,50 @@ def unmet_mentions(domain: str, text: str, tree: Tree, named: Optional[set[str]]
     """Actions the text names that the tree never takes (`named`: named_actions(domain, text), if known)."""
     named = named_actions(domain, text) if named is None else named
     return named - {leaf.action for leaf in iter_leaves(tree)}
+
+
+_CUE = r"(?:if|whether|when|whenever|unless|once)"
+_SUBJECT = (r"(?:it|it's|its|it is|the taxi|the taxi's|the taxi is|the car|you|you're|you are|ur|u r|u|i|i'm|i am|"
+            r"we|we're|we are|taxi|taxi is|taxi's|they|they're)")
+_BE = r"(?:is|are|am|'s|already|currently|still|now|not|isn't|aren't|is not|are not|in fact|actually|sitting|parked|located|right)"
+
+
+def _at(place: str) -> re.Pattern:
+    """Where a condition asks whether the taxi is at `place`."""
+    return re.compile(
+        rf"\b{_CUE}\s+(?:{_SUBJECT}\s+)?(?:{_BE}\s+){{0,3}}(?:at|in)\s+(?:the\s+)?{place}\b"
+        rf"|\b(?:in|at)\s+(?:the\s+)?{place}\?"
+        rf"|\b(?:not|n't|isn't|aren't)\s+(?:at|in)\s+(?:the\s+)?{place}\b"
+        rf"|\b(?:in|at)_?{place}\b(?=[^.]*:)|\b(?:in|at){place.capitalize()}\b|\bis(?:In|At){place.capitalize()}\b", re.I)
+
+
+QUESTION_PATTERNS: dict[str, dict[str, re.Pattern]] = {
+    "taxi": {
+        "at_airport": _at("airport"), "at_village": _at("village"), "at_city": _at("city"),
+        "has_passenger": re.compile(
+            rf"\b{_CUE}\s+(?:{_SUBJECT}\s+)?(?:has|have|got|'s got|is carrying|are carrying|carrying|carries|does|do)\s+"
+            r"(?:a\s+|any\s+|one\b|someone|somebody|anyone|anybody|nobody|no\s+)"
+            r"|\b(?:no|without|with|got)\s+(?:a\s+)?passengers?\b(?!\s+(?:to|from|at|in)\b)"
+            r"|\bempty\b|\bnobody in\b|\bsomeone in\b|\bpassenger in\b|\bhas_?passenger\b", re.I),
+        "heavy_traffic": re.compile(
+            rf"\b{_CUE}\b[^.;]{{0,50}}\b(?:heavy|light|jammed|congested|clear|busy)\b"
+            r"|\btraffic\s+(?:on\s+the\s+(?:city\s+)?road\s+|to\s+(?:the\s+)?city\s+|there\s+)?(?:is|'s|are)\s+"
+            r"(?:heavy|light|bad|clear)\b"
+            r"|\b(?:heavy|light|no heavy)\s+traffic\b(?=[^.]*[,:])", re.I),
+        "long_wait": re.compile(
+            r"\bwait\s+(?:there\s+|at the village\s+|for (?:a )?passengers?\s+(?:there\s+)?)?"
+            r"(?:is|'s|will be|is going to be|would be|looks)\s+(?:long|short)\b"
+            rf"|\b{_CUE}\b[^.;]{{0,40}}\blong\s+wait\b|\blong_?wait\b", re.I),
+    },
+}
+
+
+def named_questions(domain: str, text: str) -> set[str]:
+    """The questions of `domain` that `text` is seen to ask (empty for a domain without patterns)."""
+    return {q for q, pattern in QUESTION_PATTERNS.get(domain, {}).items() if pattern.search(text)}
+
+
+def unasked_questions(domain: str, text: str, tree: Tree, named: Optional[set[str]] = None) -> set[str]:
+    """Questions the text asks that the tree never does (`named`: named_questions(domain, text), if known)."""
+    named = named_questions(domain, text) if named is None else named
+    return named - set(questions_used(tree))

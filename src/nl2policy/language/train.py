@@ -16,7 +16,7 @@ from typing import Callable, Optional, Sequence, Union
 
 import torch
 
-from nl2policy.domains import get_domain
+from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.language.grammar import allowed_tokens, next_slot
 from nl2policy.language.decoding import beam_search, preorder_slots
 from nl2policy.language.members import MemberCheckpoints, train_forked
@@ -53,6 +53,7 @@ class TrainedTranslator:
     beam: Optional[int] = None  # hypotheses kept while decoding (1 = greedy); None: the config's
     leaf_cost: Optional[float] = None  # decoding cost of an early leaf (see ModelConfig); None: the config's
     mention_cost: Optional[float] = None  # decoding cost of a named action the tree lacks (see ModelConfig); None: the config's
+    question_cost: Optional[float] = None  # decoding cost of an asked question the tree lacks (see ModelConfig); None: the config's
     ensemble: Optional[int] = None  # decode with the first n networks only; None: all of them
     stack_members: bool = True  # flat encoders: decode all members as one batch (False: one by one, same result)
 
@@ -67,8 +68,11 @@ class TrainedTranslator:
 
     @property
     def tree_tokens(self) -> list[str]:
-        vocab = get_domain(self.domain).vocab
-        return vocab.question_ids + vocab.action_ids
+        """The labels the decoder scores: the domain's questions and actions, then (with
+        `cfg.other_domains`) the other domains' too, which only their own descriptions are
+        trained on and the grammar never lets a decoding of this domain choose."""
+        domains = [self.domain] + ([d for d in DOMAINS if d != self.domain] if self.cfg.other_domains else [])
+        return [t for d in domains for t in get_domain(d).vocab.question_ids + get_domain(d).vocab.action_ids]
 
     def encode(self, text: str) -> Encoded:
         sentences = split_sentences(text) or [[]]
@@ -137,8 +141,19 @@ def collate(items: Sequence[Encoded]) -> Batch:
                  torch.tensor([max(1, len(e.sent_lengths)) for e in items]))
 
 
+def tree_domain(tree: Tree, domains: Sequence[str]) -> str:
+    """Which of `domains` a tree's labels come from (their question and action ids are disjoint)."""
+    first = to_tokens(tree)[0]
+    for d in domains:
+        vocab = get_domain(d).vocab
+        if first in vocab.questions or first in vocab.actions:
+            return d
+    raise ValueError(f"{first!r} is a label of none of {', '.join(domains)}")
+
+
 def gold_steps(tree: Tree, domain: str, names: list[str]) -> tuple[list[int], list[int], list[int], list[list[bool]]]:
-    """Targets, parent positions, branches and allowed-token masks along a gold tree."""
+    """Targets, parent positions, branches and allowed-token masks along a gold tree of `domain`
+    (the masks allow that domain's tokens only, whichever labels `names` holds)."""
     vocab = get_domain(domain).vocab
     tokens = to_tokens(tree)
     targets, parents, branches, masks = [], [], [], []
@@ -187,8 +202,11 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
     draw = pairs if callable(pairs) else (lambda member: pairs)
     words = WordVocab.build(vocab_texts if vocab_texts is not None else [t for t, _ in draw(0)])
     vocab = get_domain(domain).vocab
-    names = vocab.question_ids + vocab.action_ids
+    if cfg.other_domains and cfg.decoder == "path":
+        raise ValueError("other_domains needs a decoder that reads its labels from tree_tokens (tree or seq)")
     model = TrainedTranslator(domain, name, cfg, words, [], cache or MiniLMCache())
+    names = model.tree_tokens
+    domains = [domain] + [d for d in DOMAINS if d != domain and cfg.other_domains]
     ckpt = MemberCheckpoints(state, on_epoch)
     last_pairs, encoded, golds = None, [], []  # the pairs last encoded: members sharing one list encode it once
 
@@ -201,7 +219,7 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
             if cfg.decoder == "path":
                 golds = [tree_nodes(tree, names, vocab.question_ids) for _, tree in member_pairs]
             else:
-                golds = [gold_steps(tree, domain, names) for _, tree in member_pairs]
+                golds = [gold_steps(tree, tree_domain(tree, domains), names) for _, tree in member_pairs]
             last_pairs, encoded = member_pairs, [model.encode(t) for t, _ in member_pairs]
         history = _fit_member(model, net, encoded, golds, len(names), seed + cfg.seed_offset + member, ckpt.partial.get(member), save, report)
         return net.state_dict(), history

@@ -4,8 +4,9 @@ description into a valid tree with a confidence and warnings.
 A description that is empty raises `EmptyDescription`; one that is off-topic or about the
 other domain still gets a (valid) tree, but with a low confidence and a warning saying why,
 so no caller mistakes it for a confident answer. A tree that never takes an action the text
-plainly names ("drive to the city") is flagged too: the writers' own trees almost never do that
-(language/mentions.py), so it points at the branch to check.
+plainly names ("drive to the city"), or never asks a question the text asks ("if it is in the
+city"), is flagged too: the writers' own trees almost never do that (language/mentions.py), so it
+points at the branch to check.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.dataset import member_pairs
 from nl2policy.language.members import default_workers, is_current
-from nl2policy.language.mentions import unmet_mentions
+from nl2policy.language.mentions import unasked_questions, unmet_mentions
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS, ModelConfig
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.text import WordVocab, tokenize
@@ -204,4 +205,7 @@ def translate(domain: str, text: str, name: str = DEFAULT_MODEL) -> Translation:
     for action in sorted(unmet_mentions(domain, text, tree)):
         said = get_domain(domain).vocab.actions[action].lower()
         warnings.append(f"the description says to {said} ({action}), but the tree never does: check where it should")
+    for question in sorted(unasked_questions(domain, text, tree)):
+        asked = get_domain(domain).vocab.questions[question].rstrip("?").lower()
+        warnings.append(f"the description asks \"{asked}?\" ({question}), but the tree never does: check where it should")
     return Translation(tree, confidence, warnings, {k: v * factor for k, v in node_probs.items()})

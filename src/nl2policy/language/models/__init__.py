@@ -22,7 +22,11 @@ a hidden width of 128 or 48, or dropout 0.45: each below the default on taxi's C
 so are -synth-cov-x4-mentions (coverage attention, `network.Translator.attend`),
 -synth-mut-x4-mentions (half the random synthetic trees replaced by one-edit mutants of training
 trees, `synthetic.mutate`) and -synth-tune1-x4-mentions (MiniLM's last layer trained along with the translator,
-`ModelConfig.minilm_tune`, `network.Translator._minilm_states`);
+`ModelConfig.minilm_tune`, `network.Translator._minilm_states`) and -synth-cross-x4-mentions (also
+trained on the other domain's descriptions by the same writers, `dataset.borrowed_pairs`);
+seq2tree-minilm-synth-x4-mentions-questions = the default's networks, whose final choice among the
+beam's trees also pays 1 nat per question the text asks that the tree never asks (taxi only;
+mentions.named_questions);
 seq2tree-minilm-synth-x4-mentions-rerun and -rerun2 = not changes: the default's recipe with other
 seeds (`ModelConfig.seed_offset`), to measure what retraining alone moves.
 Configurations live in `config.py`; the network in `network.py`.
