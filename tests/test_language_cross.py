@@ -59,6 +59,13 @@ def test_a_borrowed_tree_is_taught_with_its_own_domains_grammar():
         tree_domain(tree, ["taxi"])
 
 
+def test_the_domains_labels_are_disjoint():
+    """tree_domain tells a borrowed tree's domain by its labels, and the decoder scores both label
+    sets side by side: neither works if a question or action id were shared."""
+    labels = [set(get_domain(d).vocab.question_ids + get_domain(d).vocab.action_ids) for d in ("taxi", "highway")]
+    assert labels[0] and labels[1] and not labels[0] & labels[1]
+
+
 def test_a_cross_domain_model_scores_both_label_sets_and_outputs_only_its_own_domains_trees(one_torch_thread):
     cfg = dataclasses.replace(MODELS[CROSS], epochs=3, ensemble=2, synthetic=10, hidden=32, embed=32, minilm=False)
     specs = load_corpus("taxi")

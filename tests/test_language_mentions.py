@@ -48,27 +48,29 @@ def test_writers_trees_almost_always_take_every_action_their_text_names(domain, 
     assert sum(bool(unmet_mentions(domain, s.description, s.tree)) for s in specs) <= most
 
 
-def test_mention_check_never_leaves_more_named_actions_out_and_keeps_the_probabilities(one_torch_thread):
-    """The check only changes which of the beam's final hypotheses is kept: with a prohibitive cost,
-    no text ends with more unmet mentions than plain decoding leaves, some end with fewer (a small
-    model ignores the text often enough), the node probabilities of a changed choice are that
-    tree's own (teacher-forced), and
-    the config's setting (none) gives plain decoding back."""
+@pytest.mark.parametrize("attr, left_out", [("mention_cost", unmet_mentions), ("question_cost", unasked_questions)])
+def test_each_check_never_leaves_more_of_what_the_text_names_out_and_keeps_the_probabilities(attr, left_out,
+                                                                                           one_torch_thread):
+    """A check (named actions, asked questions) only changes which of the beam's final hypotheses
+    is kept: with a prohibitive cost, no text ends with more of what it names left out than plain
+    decoding leaves, some end with fewer (a small model ignores the text often enough), the node
+    probabilities of a changed choice are that tree's own (teacher-forced), and the config's
+    setting (none) gives plain decoding back."""
     specs = load_corpus("taxi")
     cfg = dataclasses.replace(MODELS["smoke"], epochs=2, batch=16, beam=4)
     model = fit("taxi", "one", cfg, [(s.description, s.tree) for s in specs[:40]], seed=0)
     texts = [s.description for s in specs[40:80]]
-    unmet = lambda decoded: [len(unmet_mentions("taxi", x, t)) for x, (t, _) in zip(texts, decoded)]
+    missing = lambda decoded: [len(left_out("taxi", x, t)) for x, (t, _) in zip(texts, decoded)]
     plain = model.predict(texts)
-    model.mention_cost = 100.0
+    setattr(model, attr, 100.0)
     checked = model.predict(texts)
-    assert all(c <= p for c, p in zip(unmet(checked), unmet(plain)))
-    assert sum(unmet(checked)) < sum(unmet(plain))
+    assert all(c <= p for c, p in zip(missing(checked), missing(plain)))
+    assert sum(missing(checked)) < sum(missing(plain))
     changed = [(x, c) for x, c, p in zip(texts, checked, plain) if c[0] != p[0]]
     assert changed
     for text, (tree, probs) in changed:
         _assert_teacher_forced(model, text, tree, probs)
-    model.mention_cost = None
+    setattr(model, attr, None)
     assert model.predict(texts) == plain
 
 
@@ -104,25 +106,3 @@ def test_writers_trees_almost_always_ask_every_question_their_text_asks():
     assert sum(bool(unasked_questions("taxi", s.description, s.tree)) for s in specs) <= 4
     asked = [(q, s) for s in specs for q in questions_used(s.tree)]
     assert sum(q in named_questions("taxi", s.description) for q, s in asked) >= 0.7 * len(asked)
-
-
-def test_question_check_never_leaves_more_asked_questions_out_and_keeps_the_probabilities(one_torch_thread):
-    """Like the action check: with a prohibitive cost no text ends with more unasked questions than
-    plain decoding leaves, some end with fewer, a changed choice reports that tree's own node
-    probabilities, and no cost gives plain decoding back."""
-    specs = load_corpus("taxi")
-    cfg = dataclasses.replace(MODELS["smoke"], epochs=2, batch=16, beam=4)
-    model = fit("taxi", "one", cfg, [(s.description, s.tree) for s in specs[:40]], seed=0)
-    texts = [s.description for s in specs[40:80]]
-    unasked = lambda decoded: [len(unasked_questions("taxi", x, t)) for x, (t, _) in zip(texts, decoded)]
-    plain = model.predict(texts)
-    model.question_cost = 100.0
-    checked = model.predict(texts)
-    assert all(c <= p for c, p in zip(unasked(checked), unasked(plain)))
-    assert sum(unasked(checked)) < sum(unasked(plain))
-    changed = [(x, c) for x, c, p in zip(texts, checked, plain) if c[0] != p[0]]
-    assert changed
-    for text, (tree, probs) in changed:
-        _assert_teacher_forced(model, text, tree, probs)
-    model.question_cost = None
-    assert model.predict(texts) == plain

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from typing import Callable, Sequence, Union
 
-from nl2policy.language.augment import augment_fold
 from nl2policy.domains import DOMAINS
+from nl2policy.language.augment import augment_fold
 from nl2policy.language.corpus import Spec, load_corpus
 from nl2policy.language.models.config import ModelConfig
 from nl2policy.language.synthetic import synthetic_pairs

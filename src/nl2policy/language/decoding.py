@@ -83,18 +83,16 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
         state.reorder(source)
         state.push(choice)
     trees = [from_tokens(p, vocab) if p and next_slot(p, vocab) is None else None for p in prefixes]
-    if mention_cost:
+    # the final choice's checks: (cost, what the text names, what of it a tree leaves out)
+    for cost, named_in, left_out in ((mention_cost, named_actions, unmet_mentions),
+                                     (question_cost, named_questions, unasked_questions)):
+        if not cost:
+            continue
         for b, text in enumerate(texts):
-            named = named_actions(model.domain, text)
+            named = named_in(model.domain, text)
             for k in range(K):
                 if named and trees[b * K + k] is not None:
-                    score[b, k] -= mention_cost * len(unmet_mentions(model.domain, text, trees[b * K + k], named))
-    if question_cost:
-        for b, text in enumerate(texts):
-            asked = named_questions(model.domain, text)
-            for k in range(K):
-                if asked and trees[b * K + k] is not None:
-                    score[b, k] -= question_cost * len(unasked_questions(model.domain, text, trees[b * K + k], asked))
+                    score[b, k] -= cost * len(left_out(model.domain, text, trees[b * K + k], named))
     top = score.argmax(-1)  # beams stay sorted, but finished ones may have been overtaken
     return [(trees[b * K + int(k)], probs[b * K + int(k)]) for b, k in enumerate(top)]
 
