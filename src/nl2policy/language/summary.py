@@ -184,8 +184,8 @@ def _machine_cell(counts: dict[str, int], labels: dict[str, str]) -> str:
 
 
 PAPER_FOLDS = 15
-CV_REPEATS = PAPER_FOLDS // 5  # the paper's protocol: 5-fold CV, repeated
 """The paper's protocol: 5-fold cross-validation repeated 3 times."""
+CV_REPEATS = PAPER_FOLDS // 5
 
 
 
@@ -359,7 +359,7 @@ def _unseen(runs: list[dict], domains: list[str]) -> list[str]:
         specs = load_corpus(domain)
         for protocol, repeats in (("cv", CV_REPEATS), ("writers", 1)):
             flags = [u for _, tr, te in plan_folds(specs, protocol, repeats) for u in unseen_trees(specs, tr, te)]
-            lines.append(f"| {domain} | {protocol} | {len(flags)} | {sum(flags)} | {100 * sum(flags) / len(flags):.1f} |")
+            lines.append(f"| {domain} | {protocol} | {len(flags)} | {sum(flags)} | {_pct(sum(flags), len(flags))} |")
     recorded = [r for r in runs if "unseen" in r]
     if recorded:
         lines += ["", "Tree accuracy (%) on those and on the rest, test descriptions pooled over the folds that record it:", "",

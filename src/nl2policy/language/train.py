@@ -67,12 +67,16 @@ class TrainedTranslator:
         return Translator(self.cfg, len(self.words), len(self.tree_tokens), len(vocab.question_ids))
 
     @property
+    def label_domains(self) -> list[str]:
+        """The domains whose labels the decoder scores: its own, then (with `cfg.other_domains`)
+        the others, which only their own descriptions are trained on and the grammar never lets
+        a decoding of this domain choose."""
+        return [self.domain] + ([d for d in DOMAINS if d != self.domain] if self.cfg.other_domains else [])
+
+    @property
     def tree_tokens(self) -> list[str]:
-        """The labels the decoder scores: the domain's questions and actions, then (with
-        `cfg.other_domains`) the other domains' too, which only their own descriptions are
-        trained on and the grammar never lets a decoding of this domain choose."""
-        domains = [self.domain] + ([d for d in DOMAINS if d != self.domain] if self.cfg.other_domains else [])
-        return [t for d in domains for t in get_domain(d).vocab.question_ids + get_domain(d).vocab.action_ids]
+        """The labels the decoder scores: each of `label_domains`' questions, then its actions."""
+        return [t for d in self.label_domains for t in get_domain(d).vocab.question_ids + get_domain(d).vocab.action_ids]
 
     def encode(self, text: str) -> Encoded:
         sentences = split_sentences(text) or [[]]
@@ -205,8 +209,7 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
     if cfg.other_domains and cfg.decoder == "path":
         raise ValueError("other_domains needs a decoder that reads its labels from tree_tokens (tree or seq)")
     model = TrainedTranslator(domain, name, cfg, words, [], cache or MiniLMCache())
-    names = model.tree_tokens
-    domains = [domain] + [d for d in DOMAINS if d != domain and cfg.other_domains]
+    names, domains = model.tree_tokens, model.label_domains
     ckpt = MemberCheckpoints(state, on_epoch)
     last_pairs, encoded, golds = None, [], []  # the pairs last encoded: members sharing one list encode it once
 
