@@ -88,20 +88,21 @@ def main() -> None:
     latencies.sort()
     # side by side (MiniLM cached, rounds interleaved): the ensemble's decoder as one stacked batch
     # vs member by member, the config's beam vs greedy decoding, and with vs without the config's
-    # action-mention check (stack_members, beam, mention_cost; None: the config's)
-    variants = {"stacked": (True, None, None), "member by member": (False, None, None), "stacked, greedy": (True, 1, None),
-                "stacked, no mention check": (True, None, 0.0)}
+    # action and question checks (stack_members, beam, mention_cost, question_cost; None: the config's)
+    variants = {"stacked": (True, None, None, None), "member by member": (False, None, None, None),
+                "stacked, greedy": (True, 1, None, None), "stacked, no mention check": (True, None, 0.0, None),
+                "stacked, no question check": (True, None, None, 0.0)}
     network_ms: dict[str, list[float]] = {v: [] for v in variants}
     for spec in specs:
         translator.encode(spec.description)  # MiniLM features cached for every timing
     for i, spec in enumerate(specs):
         order = list(variants)[i % len(variants):] + list(variants)[:i % len(variants)]
         for variant in order:
-            translator.stack_members, translator.beam, translator.mention_cost = variants[variant]
+            translator.stack_members, translator.beam, translator.mention_cost, translator.question_cost = variants[variant]
             t0 = time.perf_counter()
             translator.predict([spec.description])
             network_ms[variant].append(1000 * (time.perf_counter() - t0))
-    translator.stack_members, translator.beam, translator.mention_cost = True, None, None
+    translator.stack_members, translator.beam, translator.mention_cost, translator.question_cost = True, None, None, None
     net = {v: statistics.median(ms) for v, ms in network_ms.items()}
     median = statistics.median(latencies)
     p90 = latencies[int(0.9 * len(latencies))]
@@ -125,7 +126,9 @@ def main() -> None:
              f"greedy (stacked) {net['stacked, greedy']:.2f} ms: the beam costs {net['stacked'] / net['stacked, greedy']:.2f}x; "
              f"without the mention check (mention cost {translator.cfg.mention_cost}) "
              f"{net['stacked, no mention check']:.2f} ms: the check costs "
-             f"{net['stacked'] / net['stacked, no mention check']:.2f}x"]
+             f"{net['stacked'] / net['stacked, no mention check']:.2f}x; without the question check (question cost "
+             f"{translator.cfg.question_cost}, {translator.cfg.question_forms} forms) {net['stacked, no question check']:.2f} ms: "
+             f"the check costs {net['stacked'] / net['stacked, no question check']:.2f}x"]
     print("\n".join(lines))
     if args.out:
         with open(args.out, "w") as fh:

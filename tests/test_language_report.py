@@ -198,7 +198,7 @@ def test_fold_result_with_a_beam_and_decoding_costs_also_records_decoding_withou
 def test_summary_sets_each_variant_of_the_default_beside_it_on_the_folds_both_ran(tmp_path, monkeypatch):
     import dataclasses
 
-    from nl2policy.language.models.config import DEFAULT_MODEL as base, MODELS
+    from nl2policy.language.models.config import DEFAULT_NETWORKS as base, MODELS
 
     monkeypatch.setitem(MODELS, base + "-x", dataclasses.replace(MODELS[base], ensemble=6, beam=1))
     monkeypatch.setitem(MODELS, "other", dataclasses.replace(MODELS[base], synthetic=0))  # no synthetic pairs: the ablation
@@ -241,7 +241,7 @@ def test_fold_result_of_a_larger_ensemble_also_records_its_first_three_members(m
 
 
 def test_machines_whose_folds_retrain_the_same_networks_count_as_one_kind(tmp_path):
-    from nl2policy.language.models.config import DEFAULT_MODEL as base, MODELS
+    from nl2policy.language.models.config import DEFAULT_NETWORKS as base, MODELS
 
     six = next(name for name, cfg in MODELS.items() if cfg == dataclasses.replace(MODELS[base], ensemble=6))
     runs = []
@@ -263,7 +263,7 @@ def test_machines_whose_folds_retrain_the_same_networks_count_as_one_kind(tmp_pa
 
 
 def test_decoding_choices_name_the_model_whose_config_the_smaller_decoding_is(tmp_path, monkeypatch):
-    from nl2policy.language.models.config import DEFAULT_MODEL as base, MODELS
+    from nl2policy.language.models.config import DEFAULT_NETWORKS as base, MODELS
 
     six = next(name for name, cfg in MODELS.items() if cfg == dataclasses.replace(MODELS[base], ensemble=6))
     monkeypatch.setitem(MODELS, "wide-six", dataclasses.replace(MODELS[six], hidden=3 * MODELS[six].hidden))
@@ -293,3 +293,15 @@ def test_plan_names_models_protocols_and_optionally_one_domain():
     for bad in ("no-such-model:cv1", "seq2seq", "seq2seq:cvx", "seq2seq:folds", "highway/seq2seq:cv1"):
         with pytest.raises(ValueError, match="plan part"):
             parse_plan(bad, ["taxi"], DEFAULT_MODEL)
+
+
+def test_without_its_question_check_a_model_decodes_as_its_networks_plain_model():
+    """Which patterns a question check uses changes nothing once the check is off, so the extended
+    check's folds, decoded without it, are the default networks' folds (a reproduction check)."""
+    from nl2policy.language.models.config import DEFAULT_NETWORKS
+    from nl2policy.language.summary import decoded_as
+
+    ext = "seq2tree-minilm-synth-x4-mentions-questions-ext"
+    assert decoded_as(ext, "no_question_cost_tree_acc") == [DEFAULT_NETWORKS]
+    assert decoded_as(ext, "question_cost_1_tree_acc") == []  # the conditions-only model uses other patterns
+    assert decoded_as("seq2tree-minilm-synth-x4-mentions-questions", "no_question_cost_tree_acc") == [DEFAULT_NETWORKS]

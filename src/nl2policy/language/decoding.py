@@ -9,6 +9,7 @@ each node's probability comes back with the tree, for the confidence score.
 from __future__ import annotations
 
 import math
+from functools import partial
 from typing import TYPE_CHECKING
 
 import torch
@@ -17,6 +18,7 @@ from nl2policy.domains import get_domain
 from nl2policy.language.grammar import allowed_tokens, next_slot
 from nl2policy.language.mentions import named_actions, named_questions, unasked_questions, unmet_mentions
 from nl2policy.language.models.network import Batch, StackedDecoder
+from nl2policy.language.stated_rules import broken_rules, stated_rules
 from nl2policy.trees import Tree, from_tokens
 
 if TYPE_CHECKING:
@@ -33,8 +35,9 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
     offsets that sum's pull towards small trees (the reported probabilities stay the
     model's own). With a `mention_cost`, the final choice among the beam's hypotheses also
     pays that many nats for each action the text names (language/mentions.py) that the tree
-    never takes, and with a `question_cost`, that many for each question the text asks that the
-    tree never does."""
+    never takes, with a `question_cost`, that many for each question the text asks that the
+    tree never does, and with a `rule_cost`, that many for each rule the text states that the tree
+    breaks (language/stated_rules.py)."""
     vocab = get_domain(model.domain).vocab
     names = model.tree_tokens
     index = {t: i for i, t in enumerate(names)}
@@ -42,6 +45,7 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
     leaf_cost = model.cfg.leaf_cost if model.leaf_cost is None else model.leaf_cost
     mention_cost = model.cfg.mention_cost if model.mention_cost is None else model.mention_cost
     question_cost = model.cfg.question_cost if model.question_cost is None else model.question_cost
+    rule_cost = model.cfg.rule_cost if model.rule_cost is None else model.rule_cost
     B, K = len(texts), max(1, model.beam or model.cfg.beam)
     state = DecoderState(model, batch, copies=K)
     prefixes: list[list[str]] = [[] for _ in range(B * K)]
@@ -84,8 +88,10 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
         state.push(choice)
     trees = [from_tokens(p, vocab) if p and next_slot(p, vocab) is None else None for p in prefixes]
     # the final choice's checks: (cost, what the text names, what of it a tree leaves out)
+    asked = partial(named_questions, forms=model.cfg.question_forms)
     for cost, named_in, left_out in ((mention_cost, named_actions, unmet_mentions),
-                                     (question_cost, named_questions, unasked_questions)):
+                                     (question_cost, asked, unasked_questions),
+                                     (rule_cost, stated_rules, broken_rules)):
         if not cost:
             continue
         for b, text in enumerate(texts):

@@ -33,6 +33,8 @@ DECODING_ALTERNATIVES = {"greedy_tree_acc": ("beam", 1, "greedy (beam of 1)"),
                          "no_leaf_cost_tree_acc": ("leaf_cost", 0.0, "no early-leaf cost"),
                          "no_mention_cost_tree_acc": ("mention_cost", 0.0, "no action-mention check"),
                          "no_question_cost_tree_acc": ("question_cost", 0.0, "no question-mention check"),
+                         "question_cost_1_tree_acc": ("question_cost", 1.0, "question-mention check at 1 nat"),
+                         "no_rule_cost_tree_acc": ("rule_cost", 0.0, "no stated-rule check"),
                          "first_3_members_tree_acc": ("ensemble", 3, "its first 3 members"),
                          "first_4_members_tree_acc": ("ensemble", 4, "its first 4 members"),
                          "first_5_members_tree_acc": ("ensemble", 5, "its first 5 members")}

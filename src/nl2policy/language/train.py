@@ -54,6 +54,7 @@ class TrainedTranslator:
     leaf_cost: Optional[float] = None  # decoding cost of an early leaf (see ModelConfig); None: the config's
     mention_cost: Optional[float] = None  # decoding cost of a named action the tree lacks (see ModelConfig); None: the config's
     question_cost: Optional[float] = None  # decoding cost of an asked question the tree lacks (see ModelConfig); None: the config's
+    rule_cost: Optional[float] = None  # decoding cost of a stated rule the tree breaks (see ModelConfig); None: the config's
     ensemble: Optional[int] = None  # decode with the first n networks only; None: all of them
     stack_members: bool = True  # flat encoders: decode all members as one batch (False: one by one, same result)
 

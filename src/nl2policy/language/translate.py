@@ -28,6 +28,7 @@ from nl2policy.language.members import default_workers, is_current
 from nl2policy.language.mentions import unasked_questions, unmet_mentions
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS, ModelConfig
 from nl2policy.language.models.pretrained import MiniLMCache
+from nl2policy.language.stated_rules import broken_rules
 from nl2policy.language.text import WordVocab, tokenize
 from nl2policy.language.train import TrainedTranslator, fit
 from nl2policy.trees import Tree, tree_to_json
@@ -205,7 +206,9 @@ def translate(domain: str, text: str, name: str = DEFAULT_MODEL) -> Translation:
     for action in sorted(unmet_mentions(domain, text, tree)):
         said = get_domain(domain).vocab.actions[action].lower()
         warnings.append(f"the description says to {said} ({action}), but the tree never does: check where it should")
-    for question in sorted(unasked_questions(domain, text, tree)):
+    for question in sorted(unasked_questions(domain, text, tree, forms="extended")):
         asked = get_domain(domain).vocab.questions[question].rstrip("?").lower()
         warnings.append(f"the description asks \"{asked}?\" ({question}), but the tree never does: check where it should")
+    for rule in broken_rules(domain, text, tree):
+        warnings.append(f"the description says \"{rule.text}\", but the tree never does that there: check that branch")
     return Translation(tree, confidence, warnings, {k: v * factor for k, v in node_probs.items()})

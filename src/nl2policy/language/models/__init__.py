@@ -9,7 +9,7 @@ seq2tree-minilm-synth = Seq2Tree+MiniLM trained with synthetic pairs as well;
 seq2tree-minilm-synth-x3 = an ensemble of three of those (decoding averages their steps, beam of 4);
 seq2tree-minilm-synth-x3-mentions = the same ensemble, whose final choice among the beam's trees
 also pays 1 nat per action the text names that the tree never takes (language/mentions.py);
-seq2tree-minilm-synth-x4-mentions (the default) = the same with four members: a fourth member
+seq2tree-minilm-synth-x4-mentions (the default's networks) = the same with four members: a fourth member
 gained taxi 1.7 points (CV) and 5 (leave-writers-out) for no more training time on two cores;
 seq2tree-minilm-synth-x3-leafcost (experimental) = the x3 ensemble, whose beam also charges a
 branch that ends early (an action where a question could still go) 0.5 nats;
@@ -27,6 +27,10 @@ trained on the other domain's descriptions by the same writers, `dataset.borrowe
 seq2tree-minilm-synth-x4-mentions-questions = the default's networks, whose final choice among the
 beam's trees also pays 1 nat per question the text asks that the tree never asks (taxi only;
 mentions.named_questions);
+seq2tree-minilm-synth-x4-mentions-questions-ext (the default) = the same networks, the question check finding
+questions by their extended forms too (list headers, code) and paying 2 nats for each;
+seq2tree-minilm-synth-x4-mentions-questions-ext-rules (experimental) = the default, whose final
+choice also keeps away from a tree that breaks a rule the text states (language/stated_rules.py);
 seq2tree-minilm-synth-x4-mentions-rerun and -rerun2 = not changes: the default's recipe with other
 seeds (`ModelConfig.seed_offset`), to measure what retraining alone moves.
 Configurations live in `config.py`; the network in `network.py`.
