@@ -177,7 +177,8 @@ MODELS: dict[str, ModelConfig] = {
     # description states (0 of 200), so it is not weighed against the networks' scores. Written for
     # the leaves that follow the corpus's habit instead of the text, read off the errors of CV repeat 0
     # (on its saved networks, 88.0 against 86.0: a scratch analysis). Leave-writers-out 81.50 against
-    # the default's 81.00 on the same networks (better on 1 fold, worse on none); CV not run yet
+    # the default's 81.00 on the same networks (better on 1 fold, worse on none); CV repeat 0, the
+    # folds the rules were written from, 88.00 against 86.00; repeats 1 and 2 not run yet
     "seq2tree-minilm-synth-x4-mentions-questions-ext-rules": replace(X4_MENTIONS, question_cost=2.0,
                                                                      question_forms="extended", rule_cost=100.0),
     # experimental: seq2tree-minilm-synth-x3's networks, decoded with a cost of 0.5 nats on each branch that
