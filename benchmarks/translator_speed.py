@@ -87,22 +87,25 @@ def main() -> None:
         features.append(1000 * (time.perf_counter() - t0))
     latencies.sort()
     # side by side (MiniLM cached, rounds interleaved): the ensemble's decoder as one stacked batch
-    # vs member by member, the config's beam vs greedy decoding, and with vs without the config's
-    # action and question checks (stack_members, beam, mention_cost, question_cost; None: the config's)
-    variants = {"stacked": (True, None, None, None), "member by member": (False, None, None, None),
-                "stacked, greedy": (True, 1, None, None), "stacked, no mention check": (True, None, 0.0, None),
-                "stacked, no question check": (True, None, None, 0.0)}
+    # vs member by member, the config's beam vs greedy decoding, and with vs without each of the
+    # config's checks (the translator's overrides of its config; None: the config's own)
+    variants = {"stacked": {}, "member by member": {"stack_members": False}, "stacked, greedy": {"beam": 1},
+                "stacked, no mention check": {"mention_cost": 0.0}, "stacked, no question check": {"question_cost": 0.0},
+                "stacked, no rule check": {"rule_cost": 0.0}}
+    defaults = {"stack_members": True, "beam": None, "mention_cost": None, "question_cost": None, "rule_cost": None}
     network_ms: dict[str, list[float]] = {v: [] for v in variants}
     for spec in specs:
         translator.encode(spec.description)  # MiniLM features cached for every timing
     for i, spec in enumerate(specs):
         order = list(variants)[i % len(variants):] + list(variants)[:i % len(variants)]
         for variant in order:
-            translator.stack_members, translator.beam, translator.mention_cost, translator.question_cost = variants[variant]
+            for attr, value in {**defaults, **variants[variant]}.items():
+                setattr(translator, attr, value)
             t0 = time.perf_counter()
             translator.predict([spec.description])
             network_ms[variant].append(1000 * (time.perf_counter() - t0))
-    translator.stack_members, translator.beam, translator.mention_cost, translator.question_cost = True, None, None, None
+    for attr, value in defaults.items():
+        setattr(translator, attr, value)
     net = {v: statistics.median(ms) for v, ms in network_ms.items()}
     median = statistics.median(latencies)
     p90 = latencies[int(0.9 * len(latencies))]
@@ -128,7 +131,9 @@ def main() -> None:
              f"{net['stacked, no mention check']:.2f} ms: the check costs "
              f"{net['stacked'] / net['stacked, no mention check']:.2f}x; without the question check (question cost "
              f"{translator.cfg.question_cost}, {translator.cfg.question_forms} forms) {net['stacked, no question check']:.2f} ms: "
-             f"the check costs {net['stacked'] / net['stacked, no question check']:.2f}x"]
+             f"the check costs {net['stacked'] / net['stacked, no question check']:.2f}x; without the rule check (rule cost "
+             f"{translator.cfg.rule_cost}) {net['stacked, no rule check']:.2f} ms: the check costs "
+             f"{net['stacked'] / net['stacked, no rule check']:.2f}x"]
     print("\n".join(lines))
     if args.out:
         with open(args.out, "w") as fh:

@@ -148,3 +148,17 @@ def test_no_highway_description_asks_a_question_the_check_finds():
     highway tree."""
     specs = load_corpus("highway")
     assert not any(named_questions("highway", s.description, forms) for s in specs for forms in ("conditions", "extended"))
+
+
+def test_findings_are_cached_and_immutable():
+    """The decoder and translate's warnings share one reading of a text (an LRU cache), so what
+    a reading returns must not be changeable by either of them."""
+    from nl2policy.language.stated_rules import stated_rules
+
+    text = "If you are in the city with no passenger, wait. No passenger and not in the city: go to the city."
+    questions = named_questions("taxi", text, "extended")
+    assert isinstance(questions, frozenset) and named_questions("taxi", text, "extended") is questions
+    assert isinstance(named_actions("taxi", text), frozenset)
+    rules = stated_rules("taxi", text)
+    assert isinstance(rules, tuple) and rules and stated_rules("taxi", text) is rules
+    assert named_questions("taxi", text, "conditions") <= questions  # the forms are part of the key

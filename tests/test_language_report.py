@@ -6,7 +6,8 @@ import json
 import pytest
 
 from nl2policy.language.evaluate import held_out_writers
-from nl2policy.language.summary import machine_kinds, summarize
+from nl2policy.language.reproduction import machine_kinds
+from nl2policy.language.summary import summarize
 
 
 def _run(domain, model, fold, protocol, tree_acc):
@@ -299,9 +300,11 @@ def test_without_its_question_check_a_model_decodes_as_its_networks_plain_model(
     """Which patterns a question check uses changes nothing once the check is off, so the extended
     check's folds, decoded without it, are the default networks' folds (a reproduction check)."""
     from nl2policy.language.models.config import DEFAULT_NETWORKS
-    from nl2policy.language.summary import decoded_as
+    from nl2policy.language.reproduction import decoded_as
 
     ext = "seq2tree-minilm-synth-x4-mentions-questions-ext"
     assert decoded_as(ext, "no_question_cost_tree_acc") == [DEFAULT_NETWORKS]
     assert decoded_as(ext, "question_cost_1_tree_acc") == []  # the conditions-only model uses other patterns
     assert decoded_as("seq2tree-minilm-synth-x4-mentions-questions", "no_question_cost_tree_acc") == [DEFAULT_NETWORKS]
+    # the default without its rule check is the extended question model, whose folds it reproduces
+    assert decoded_as("seq2tree-minilm-synth-x4-mentions-questions-ext-rules", "no_rule_cost_tree_acc") == [ext]

@@ -43,7 +43,7 @@ def test_a_tree_breaks_a_rule_when_no_state_meeting_its_condition_gets_its_actio
     # context the clause leaves out only narrows the states: "in the village, wait" holds for
     # the empty taxi alone, and the tree that drives a passenger to the airport does not break it
     assert broken_rules("taxi", "In the village, wait.", said) == []
-    assert stated_rules("highway", "If the left lane is free, move left.") == []  # no patterns yet
+    assert stated_rules("highway", "If the left lane is free, move left.") == ()  # no patterns yet
 
 
 def test_no_writers_tree_breaks_a_rule_its_description_states():

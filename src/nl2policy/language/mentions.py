@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Optional
 
 from nl2policy.trees import Tree
@@ -95,15 +96,21 @@ def find_mentions(group: ActionGroup, text: str) -> list[tuple[int, int, str, st
     return out
 
 
-def named_actions(domain: str, text: str) -> set[str]:
+TEXTS_CACHED = 512
+"""How many texts' findings are kept: the decoder's final choice and `translate`'s warnings read the
+same text, so the patterns run once per description (a few tenths of a millisecond each)."""
+
+
+@lru_cache(maxsize=TEXTS_CACHED)
+def named_actions(domain: str, text: str) -> frozenset[str]:
     """The actions of `domain` that `text` is seen to name (empty for a domain without patterns)."""
-    return {action for group in GROUPS.get(domain, []) for *_, action in find_mentions(group, text)}
+    return frozenset(action for group in GROUPS.get(domain, []) for *_, action in find_mentions(group, text))
 
 
-def unmet_mentions(domain: str, text: str, tree: Tree, named: Optional[set[str]] = None) -> set[str]:
+def unmet_mentions(domain: str, text: str, tree: Tree, named: Optional[frozenset[str]] = None) -> frozenset[str]:
     """Actions the text names that the tree never takes (`named`: named_actions(domain, text), if known)."""
     named = named_actions(domain, text) if named is None else named
-    return named - {leaf.action for leaf in iter_leaves(tree)}
+    return frozenset(named) - {leaf.action for leaf in iter_leaves(tree)}
 
 
 _CUE = r"(?:if|whether|when|whenever|unless|once)"
@@ -194,17 +201,22 @@ EXTENDED_QUESTION_PATTERNS: dict[str, dict[str, re.Pattern]] = {
 QUESTION_FORMS = ("conditions", "extended")  # which patterns named_questions uses
 
 
-def named_questions(domain: str, text: str, forms: str = "conditions") -> set[str]:
+def named_questions(domain: str, text: str, forms: str = "conditions") -> frozenset[str]:
     """The questions of `domain` that `text` is seen to ask (empty for a domain without patterns):
     by the condition patterns alone, or with `forms="extended"` also by the extended forms."""
     if forms not in QUESTION_FORMS:
         raise ValueError(f"unknown question forms {forms!r}; choose one of {', '.join(QUESTION_FORMS)}")
+    return _named_questions(domain, text, forms)
+
+
+@lru_cache(maxsize=TEXTS_CACHED)
+def _named_questions(domain: str, text: str, forms: str) -> frozenset[str]:
     tables = [QUESTION_PATTERNS] + ([EXTENDED_QUESTION_PATTERNS] if forms == "extended" else [])
-    return {q for table in tables for q, pattern in table.get(domain, {}).items() if pattern.search(text)}
+    return frozenset(q for table in tables for q, pattern in table.get(domain, {}).items() if pattern.search(text))
 
 
-def unasked_questions(domain: str, text: str, tree: Tree, named: Optional[set[str]] = None,
-                      forms: str = "conditions") -> set[str]:
+def unasked_questions(domain: str, text: str, tree: Tree, named: Optional[frozenset[str]] = None,
+                      forms: str = "conditions") -> frozenset[str]:
     """Questions the text asks that the tree never does (`named`: named_questions(domain, text, forms), if known)."""
     named = named_questions(domain, text, forms) if named is None else named
-    return named - set(questions_used(tree))
+    return frozenset(named) - set(questions_used(tree))

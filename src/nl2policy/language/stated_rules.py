@@ -25,9 +25,11 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Optional
+from functools import lru_cache
+from typing import Optional, Sequence
 
 from nl2policy.domains import get_domain
+from nl2policy.language.mentions import TEXTS_CACHED
 from nl2policy.trees import Tree
 
 
@@ -92,10 +94,11 @@ def _answers(domain: str, clause: str) -> list[tuple[int, int, str, bool]]:
             if not a or not any(q == q2 and s < e2 and s2 < e for s2, e2, q2 in noes)]
 
 
-def stated_rules(domain: str, text: str) -> list[StatedRule]:
+@lru_cache(maxsize=TEXTS_CACHED)  # the decoder's final choice and translate's warnings read the same text
+def stated_rules(domain: str, text: str) -> tuple[StatedRule, ...]:
     """The rules `text` states outright, in order (empty for a domain without patterns)."""
     if domain not in _ANSWERS:
-        return []
+        return ()
     possible = get_domain(domain).possible_answer_sets
     rules = []
     for clause in _CLAUSE.split(text):
@@ -116,10 +119,10 @@ def stated_rules(domain: str, text: str) -> list[StatedRule]:
         else:
             if condition and any(all(state[q] == a for q, a in condition.items()) for state in possible):
                 rules.append(StatedRule(tuple(sorted(condition.items())), action, clause.strip()))
-    return rules
+    return tuple(rules)
 
 
-def broken_rules(domain: str, text: str, tree: Tree, rules: Optional[list[StatedRule]] = None) -> list[StatedRule]:
+def broken_rules(domain: str, text: str, tree: Tree, rules: Optional[Sequence[StatedRule]] = None) -> list[StatedRule]:
     """The stated rules (`rules`: stated_rules(domain, text), if known) that no state meeting their
     condition gets their action for from `tree`."""
     rules = stated_rules(domain, text) if rules is None else rules

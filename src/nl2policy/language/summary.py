@@ -15,11 +15,12 @@ from typing import Sequence
 
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.evaluate import DECODING_ALTERNATIVES, held_out_writers, plan_folds, read_runs, unseen_trees
-from nl2policy.language.models.config import DEFAULT_MODEL, DEFAULT_NETWORKS, MODELS, ModelConfig
+from nl2policy.language.models.config import DEFAULT_MODEL, DEFAULT_NETWORKS, MODELS
+from nl2policy.language.reproduction import (decoded_as, fold_machine, machine_kinds, machine_labels, reproduction_checks,
+                                              reproduction_lines)
 from nl2policy.language.translate import LOW_CONFIDENCE
 
 PAPER_HAN2TREE = {"taxi": 86.30, "highway": 80.38}
-
 
 
 def _one_per_fold(runs: list[dict]) -> list[dict]:
@@ -31,99 +32,12 @@ def _one_per_fold(runs: list[dict]) -> list[dict]:
     return list(first.values())
 
 
-
 def _by_row(runs: list[dict]) -> dict[tuple[str, str, str], list[dict]]:
     """Folds grouped by table row: (domain, model, protocol)."""
     rows: dict[tuple[str, str, str], list[dict]] = {}
     for r in runs:
         rows.setdefault((r["domain"], r["model"], r["protocol"]), []).append(r)
     return rows
-
-
-
-NOT_RECORDED = "not recorded"
-"""The machine of a fold recorded before folds carried theirs (see results/translation/README.md)."""
-
-
-
-def fold_machine(run: dict) -> str:
-    return run.get("machine", NOT_RECORDED)
-
-
-
-MIN_REPRODUCED = 5
-"""Folds on which two kinds of CPU must have trained the same networks, agreeing on every one,
-before the paired tables set one's folds beside the other's."""
-
-
-
-def reproduction_checks(runs: list[dict]) -> dict[tuple[str, str], tuple[int, int]]:
-    """Do two records of the same networks on the same fold agree? A fold of model Y records its
-    networks decoded with less of a choice (DECODING_ALTERNATIVES); where that is exactly model X's
-    config (Y = seq2tree-minilm-synth-x6-mentions with its first four members: X =
-    seq2tree-minilm-synth-x4-mentions), X's own fold of the same domain retrained those networks and
-    must score the same. Per pair of machines (sorted): (folds whose tree accuracy agrees, folds).
-    On one machine this checks that training is deterministic; across two, whether they are one
-    kind of CPU as far as training goes (the earlier machine never recorded its kind)."""
-    index = {(r["domain"], r["model"], r["fold"]): r for r in runs}
-    checks: dict[tuple[str, str], tuple[int, int]] = {}
-    for r in runs:
-        for key in DECODING_ALTERNATIVES:
-            if key not in r:
-                continue
-            for other in decoded_as(r["model"], key):
-                if (o := index.get((r["domain"], other, r["fold"]))) is not None:
-                    pair = tuple(sorted((fold_machine(r), fold_machine(o))))
-                    agree, n = checks.get(pair, (0, 0))
-                    checks[pair] = (agree + (o["tree_acc"] == r[key]), n + 1)
-    return checks
-
-
-
-def decoded_as(model: str, key: str) -> list[str]:
-    """The models whose config is exactly `model` decoded with less of one choice
-    (DECODING_ALTERNATIVES[key]): seq2tree-minilm-synth-x6-mentions with its first four members
-    is seq2tree-minilm-synth-x4-mentions. Such a model's own fold trains the same networks."""
-    if model not in MODELS:
-        return []
-    attr, off, _ = DECODING_ALTERNATIVES[key]
-    target = _decodes_as(replace(MODELS[model], **{attr: off}))
-    return [name for name, cfg in MODELS.items() if _decodes_as(cfg) == target]
-
-
-def _decodes_as(cfg: ModelConfig) -> ModelConfig:
-    """`cfg` with the settings that change nothing set to their defaults: without a question check,
-    which patterns it would use."""
-    return cfg if cfg.question_cost else replace(cfg, question_forms=ModelConfig.question_forms)
-
-
-def machine_kinds(checks: dict[tuple[str, str], tuple[int, int]], labels: dict[str, str]) -> dict[str, str]:
-    """Each machine -> the first-labelled machine it reproduces (itself if none): two machines are
-    one kind when their checks agree on every fold, and on at least MIN_REPRODUCED."""
-    kind = {m: m for m in labels}
-    for (a, b), (agree, n) in _in_label_order(checks, labels):
-        if a != b and agree == n >= MIN_REPRODUCED:
-            first, second = sorted((kind[a], kind[b]), key=lambda m: labels[m])
-            kind = {m: first if k == second else k for m, k in kind.items()}
-    return kind
-
-
-
-def _in_label_order(checks: dict[tuple[str, str], tuple[int, int]], labels: dict[str, str]) -> list:
-    """The checks sorted by their machines' labels (A with A, A with B, ...). Both come from the
-    same folds, so every machine a check names has a label."""
-    return sorted(checks.items(), key=lambda c: sorted(labels[m] for m in c[0]))
-
-
-
-def machine_labels(runs: list[dict]) -> dict[str, str]:
-    """A short label per kind of CPU (A, B, ...), in the order the folds first name them: the
-    tables say which machine trained each row, since folds reproduce only on one kind."""
-    labels: dict[str, str] = {}
-    for r in runs:
-        labels.setdefault(fold_machine(r), chr(ord("A") + len(labels)))
-    return labels
-
 
 
 def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str, str, str, int]] = ()) -> Path:
@@ -153,7 +67,7 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
              "Model seed = repeat index. Paper's HAN2Tree (CV): taxi 86.30, highway 80.38.", "",
              "Machines (folds retrain bit for bit only on the kind of CPU that first ran them; seconds per fold "
              "depend on it and on the worker processes): " + "; ".join(f"{label} = {m}" for m, label in labels.items()) + ".",
-             *_reproduction_lines(checks, kinds, labels), "",
+             *reproduction_lines(checks, kinds, labels), "",
              "| domain | model | protocol | folds | tree acc | token acc | policy acc | all outputs valid | train pairs | s/fold | machine |",
              "|---|---|---|---:|---:|---:|---:|---|---:|---:|---|"]
     for r in rows:
@@ -180,7 +94,6 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
     return md
 
 
-
 def _machine_cell(counts: dict[str, int], labels: dict[str, str]) -> str:
     """"A" when one machine ran every fold of a row, else "A 13, B 2"."""
     if len(counts) == 1:
@@ -188,11 +101,9 @@ def _machine_cell(counts: dict[str, int], labels: dict[str, str]) -> str:
     return ", ".join(f"{labels[m]} {n}" for m, n in counts.items())
 
 
-
 PAPER_FOLDS = 15
 """The paper's protocol: 5-fold cross-validation repeated 3 times."""
 CV_REPEATS = PAPER_FOLDS // 5
-
 
 
 def _against_paper(rows: list[dict]) -> list[str]:
@@ -215,7 +126,6 @@ def _against_paper(rows: list[dict]) -> list[str]:
     return ["", f"## Best model against the paper (cross-validated over at least {PAPER_FOLDS} folds, as the paper)", "",
             "| domain | best model | CV tree acc | leave-writers-out tree acc | paper's HAN2Tree (CV) | at or above the paper |",
             "|---|---|---:|---:|---:|---|"] + lines
-
 
 
 def _decoding_effects(runs: list[dict]) -> list[str]:
@@ -241,7 +151,6 @@ def _decoding_effects(runs: list[dict]) -> list[str]:
             "|---|---|---|---:|---|---:|---:|---|"] + lines
 
 
-
 VARIANT_FIELDS = ("encoder", "decoder", "minilm", "minilm_layers")
 """What makes a model a variant of the default: the same kind of network, also trained on synthetic
 pairs (see `is_variant`), differing in how many are trained, on how much of which data, how wide,
@@ -256,21 +165,6 @@ def is_variant(name: str, base: str = DEFAULT_NETWORKS) -> bool:
         return False
     cfg, ref = MODELS[name], MODELS[base]
     return all(getattr(cfg, f) == getattr(ref, f) for f in VARIANT_FIELDS) and bool(cfg.synthetic) == bool(ref.synthetic)
-
-
-
-def _reproduction_lines(checks: dict[tuple[str, str], tuple[int, int]], kinds: dict[str, str],
-                        labels: dict[str, str]) -> list[str]:
-    if not checks:
-        return []
-    same = sorted({f"{labels[m]} = {labels[k]}" for m, k in kinds.items() if m != k})
-    return ["Reproduction checks (one fold's networks recorded by two models, e.g. a model's first four "
-            "members and the four-member model's own fold; folds whose tree accuracy agrees): "
-            + "; ".join(" with ".join(sorted(labels[m] for m in pair)) + f" {agree} of {n}"
-                        for pair, (agree, n) in _in_label_order(checks, labels))
-            + ". " + (f"Counted as one kind of CPU in the paired tables (all of at least {MIN_REPRODUCED} agree): "
-                      + ", ".join(same) + "." if same else "")]
-
 
 
 def _variants(runs: list[dict], kinds: dict[str, str], base: str = DEFAULT_NETWORKS) -> list[str]:
@@ -307,12 +201,10 @@ def is_rerun(name: str, base: str = DEFAULT_NETWORKS) -> bool:
     return cfg is not None and cfg.seed_offset != ref.seed_offset and replace(cfg, seed_offset=ref.seed_offset) == ref
 
 
-
 def _paired_cells(pairs: list[tuple[float, float]]) -> str:
     """The last three cells of a paired-comparison row: both means and folds better / worse."""
     return (f"{mean(a for a, _ in pairs):.2f} | {mean(b for _, b in pairs):.2f} | "
             f"{sum(a > b for a, b in pairs)} / {sum(a < b for a, b in pairs)} |")
-
 
 
 def _writer_breakdown(runs: list[dict]) -> list[str]:
@@ -330,7 +222,6 @@ def _writer_breakdown(runs: list[dict]) -> list[str]:
             lines.append(f"| {model} | " + " | ".join(f"{acc[k]:.0f}" if k in acc else "not run" for k in keys) + " |")
         lines.append("")
     return lines
-
 
 
 def _pct(part: int, whole: int) -> str:
@@ -352,7 +243,6 @@ def _calibration(runs: list[dict]) -> list[str]:
         lines.append(f"| {domain} | {model} | {protocol} | {_pct(sure, n)} | {_pct(sum(r['confident_right'] for r in rs), sure)} | "
                      f"{_pct(sum(r['unsure_right'] for r in rs), n - sure)} |")
     return lines
-
 
 
 def _unseen(runs: list[dict], domains: list[str]) -> list[str]:

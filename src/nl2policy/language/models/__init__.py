@@ -27,10 +27,12 @@ trained on the other domain's descriptions by the same writers, `dataset.borrowe
 seq2tree-minilm-synth-x4-mentions-questions = the default's networks, whose final choice among the
 beam's trees also pays 1 nat per question the text asks that the tree never asks (taxi only;
 mentions.named_questions);
-seq2tree-minilm-synth-x4-mentions-questions-ext (the default) = the same networks, the question check finding
+seq2tree-minilm-synth-x4-mentions-questions-ext = the same networks, the question check finding
 questions by their extended forms too (list headers, code) and paying 2 nats for each;
-seq2tree-minilm-synth-x4-mentions-questions-ext-rules (experimental) = the default, whose final
+seq2tree-minilm-synth-x4-mentions-questions-ext-rules (the default) = the model above, whose final
 choice also keeps away from a tree that breaks a rule the text states (language/stated_rules.py);
+seq2tree-minilm-synth-x6-mentions-questions-ext-rules (measured) = the default's checks on the six
+members of seq2tree-minilm-synth-x6-mentions (over the training budget);
 seq2tree-minilm-synth-x4-mentions-rerun and -rerun2 = not changes: the default's recipe with other
 seeds (`ModelConfig.seed_offset`), to measure what retraining alone moves.
 Configurations live in `config.py`; the network in `network.py`.
