@@ -3,7 +3,7 @@
 "whether it has a passenger", "if the wait there is long".
 
 Two uses. Counterfactual augmentation (counterfactual.py) rewrites the mentions it finds. The
-decoder's mention check (train.py) prefers, among its final hypotheses, a tree that does every
+decoder's mention check (decoding.py) prefers, among its final hypotheses, a tree that does every
 action the text names: a text that says "drive to the city" and a tree that never does are at odds.
 The patterns are built for precision, not recall: on the corpus, an action they find is missing
 from the writer's own tree in 1 of 197 taxi and 3 of 195 highway descriptions (tests check this),
