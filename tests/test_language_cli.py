@@ -127,15 +127,42 @@ def test_a_tree_that_never_asks_a_question_the_text_asks_is_flagged(home, monkey
     assert [w for w in listed.warnings if "check where it should" in w] == [warning]
 
 
+def _rule_warnings(monkeypatch, tree: dict, text: str) -> list[str]:
+    """The rule warnings `translate` gives `text` when the smoke model's decoding returns `tree`."""
+    tree = parse_tree(tree, get_domain("taxi").vocab)
+    loaded = tr.get_model("taxi", "smoke")
+    monkeypatch.setattr(loaded.translator, "predict", lambda texts: [(tree, {0: 0.9, 1: 0.9, 2: 0.9, 4: 0.9, 5: 0.9})])
+    return [w for w in tr.translate("taxi", text, "smoke").warnings if "that there" in w]
+
+
 def test_a_tree_that_breaks_a_rule_the_text_states_is_flagged(home, monkeypatch):
     """The warning quotes each rule the text states that no branch of the tree follows (stated_rules.py)."""
-    vocab = get_domain("taxi").vocab
-    habit = parse_tree({"if": "has_passenger", "yes": {"do": "go_airport"},
-                        "no": {"if": "at_village", "yes": {"do": "wait"}, "no": {"do": "go_village"}}}, vocab)
-    loaded = tr.get_model("taxi", "smoke")
-    monkeypatch.setattr(loaded.translator, "predict", lambda texts: [(habit, {0: 0.9, 1: 0.9, 2: 0.9, 4: 0.9, 5: 0.9})])
-    said = tr.translate("taxi", "With a passenger, drive to the airport. In the village, wait. "
-                                "No passenger and not in the village: go to the city.", "smoke")
-    assert [w for w in said.warnings if "never does that" in w] == [
+    habit = {"if": "has_passenger", "yes": {"do": "go_airport"},
+             "no": {"if": "at_village", "yes": {"do": "wait"}, "no": {"do": "go_village"}}}
+    assert _rule_warnings(monkeypatch, habit, "With a passenger, drive to the airport. In the village, wait. "
+                                              "No passenger and not in the village: go to the city.") == [
         'the description says "No passenger and not in the village: go to the city", but the tree never does that '
         'there: check that branch']
+
+
+def test_a_tree_that_does_not_always_follow_a_quantified_rule_is_flagged(home, monkeypatch):
+    """"..., no matter what": the warning quotes the rule when some branch under its condition does
+    something else (stated_rules.py, extended forms), whatever forms the model's own check reads."""
+    asks = {"if": "heavy_traffic", "yes": {"do": "go_village"},
+            "no": {"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_city"}}}
+    assert _rule_warnings(monkeypatch, asks, "When the road is jammed, go to the village. When it's clear, drive to "
+                                             "the city, no matter what.") == [
+        'the description says "When it\'s clear, drive to the city, no matter what", but the tree does not always do '
+        'that there: check that branch']
+
+
+def test_a_tree_that_asks_another_question_first_than_the_text_says_is_flagged(home, monkeypatch):
+    vocab = get_domain("taxi").vocab
+    tree = parse_tree({"if": "at_city", "yes": {"do": "wait"}, "no": {"do": "go_city"}}, vocab)
+    loaded = tr.get_model("taxi", "smoke")
+    monkeypatch.setattr(loaded.translator, "predict", lambda texts: [(tree, {0: 0.9, 1: 0.9, 2: 0.9})])
+    top = lambda text: [w for w in tr.translate("taxi", text, "smoke").warnings if "check its top" in w]
+    assert top("First check whether there is a passenger. In the city, wait; elsewhere drive to the city.") == [
+        'the description says to ask first "does the taxi have a passenger?" (has_passenger), but the tree asks '
+        'something else first: check its top']
+    assert top("First check whether you are in the city: if so wait, if not drive to the city.") == []

@@ -43,7 +43,7 @@ def test_experiment_never_runs_a_fold_twice(tmp_path, monkeypatch):
 
     calls, workers = [], set()
 
-    def fake_fold(domain, specs, train_idx, test_idx, name, seed, cache, n_workers):
+    def fake_fold(domain, specs, train_idx, test_idx, name, seed, cache, n_workers, keep=None, reuse=None):
         calls.append((domain, name, tuple(test_idx)))
         workers.add(n_workers)
         return {"n": len(test_idx), "valid": len(test_idx), "tree_acc": 0.5, "token_acc": 0.5, "policy_acc": 0.5,
@@ -130,8 +130,10 @@ def test_summary_counts_unseen_test_trees_and_pools_accuracy_on_them(tmp_path):
     assert counts and 0 < int(counts[1]) < 600 and float(counts[2]) == round(100 * int(counts[1]) / 600, 1)
 
 
-def test_fold_result_counts_confident_and_unsure_translations(monkeypatch, one_torch_thread):
+def test_fold_result_counts_confident_and_unsure_translations(monkeypatch, one_torch_thread, tmp_path):
     import dataclasses
+
+    import torch
 
     from nl2policy.language import evaluate
     from nl2policy.language.corpus import load_corpus
@@ -141,7 +143,10 @@ def test_fold_result_counts_confident_and_unsure_translations(monkeypatch, one_t
 
     monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=2))
     specs = load_corpus("taxi")[:40]
-    r = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
+    kept = tmp_path / "nets" / "fold.pt"
+    r = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache(), keep=kept)
+    saved = torch.load(kept, weights_only=False)  # the fold's networks, to decode again without retraining
+    assert saved["test"] == list(range(30, 40)) and saved["train"] == list(range(30)) and len(saved["nets"]) == 1
     assert 0 <= r["confident"] <= r["n"] == 10
     assert r["confident_right"] + r["unsure_right"] == round(r["tree_acc"] * 10)
     assert r["confident_right"] <= r["confident"]
@@ -308,3 +313,52 @@ def test_without_its_question_check_a_model_decodes_as_its_networks_plain_model(
     assert decoded_as("seq2tree-minilm-synth-x4-mentions-questions", "no_question_cost_tree_acc") == [DEFAULT_NETWORKS]
     # the default without its rule check is the extended question model, whose folds it reproduces
     assert decoded_as("seq2tree-minilm-synth-x4-mentions-questions-ext-rules", "no_rule_cost_tree_acc") == [ext]
+    # which forms a rule check reads changes nothing once it is off; the default without its root cost
+    rules_ext = "seq2tree-minilm-synth-x4-mentions-questions-ext-rules-ext"
+    assert decoded_as(rules_ext, "no_rule_cost_tree_acc") == [ext]
+    assert decoded_as(rules_ext + "-root", "no_root_cost_tree_acc") == [rules_ext]
+
+
+def test_summary_marks_folds_that_decoded_another_models_networks_and_checks_no_reproduction_with_them(tmp_path):
+    """A fold that decoded saved networks (--networks-from) retrained nothing: its seconds are
+    decoding only, and it is no evidence that training reproduces."""
+    from nl2policy.language.reproduction import reproduction_checks
+
+    ext = "seq2tree-minilm-synth-x4-mentions-questions-ext"
+    runs = [dict(_run("taxi", ext, "cv-r0-f0", "cv", 0.5), machine="cpu x"),
+            dict(_run("taxi", ext + "-rules", "cv-r0-f0", "cv", 0.75), machine="cpu x", no_rule_cost_tree_acc=0.5,
+                 networks_from=ext)]
+    (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
+    md = summarize(tmp_path, "cmd", "budget").read_text()
+    assert f"| taxi | {ext}-rules | cv | 1 | 75.00 (0.00) | 90.00 (0.00) | 75.00 (0.00) | yes | 10 | 1.0 * | A |" in md
+    assert f"| taxi | {ext} | cv | 1 | 50.00 (0.00) | 90.00 (0.00) | 50.00 (0.00) | yes | 10 | 1.0 | A |" in md
+    assert "\\* decoded the networks another model trained" in md
+    assert reproduction_checks(runs) == {}
+    del runs[1]["networks_from"]  # had it trained them, it would check the other's fold
+    assert reproduction_checks(runs) == {("cpu x", "cpu x"): (1, 1)}
+
+
+def test_a_fold_can_decode_the_networks_another_model_trained_on_it(monkeypatch, one_torch_thread, tmp_path):
+    """--keep-networks, then --networks-from: a model that differs only in decoding decodes the
+    saved networks of the same fold, and scores what training them anew gives."""
+    import dataclasses
+
+    from nl2policy.language import evaluate
+    from nl2policy.language.corpus import load_corpus
+    from nl2policy.language.models.config import MODELS
+    from nl2policy.language.models.pretrained import MiniLMCache
+
+    monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=2, ensemble=2))
+    monkeypatch.setitem(MODELS, "tiny-first", dataclasses.replace(MODELS["tiny"], ensemble=1, beam=2))
+    monkeypatch.setitem(MODELS, "tiny-longer", dataclasses.replace(MODELS["tiny"], epochs=3))
+    specs = load_corpus("taxi")[:40]
+    train, test = list(range(30)), list(range(30, 40))
+    evaluate.run_fold("taxi", specs, train, test, "tiny", 0, MiniLMCache(), keep=tmp_path / "taxi-tiny-cv-r0-f0.pt")
+    saved = evaluate.kept_networks(tmp_path, "taxi", "tiny-first", "cv-r0-f0", train, test)
+    assert saved is not None and saved["name"] == "tiny"
+    assert evaluate.kept_networks(tmp_path, "taxi", "tiny-longer", "cv-r0-f0", train, test) is None  # other training
+    assert evaluate.kept_networks(tmp_path, "taxi", "tiny-first", "cv-r0-f0", train[1:], test) is None  # other fold
+    reused = evaluate.run_fold("taxi", specs, train, test, "tiny-first", 0, MiniLMCache(), reuse=saved)
+    trained = evaluate.run_fold("taxi", specs, train, test, "tiny-first", 0, MiniLMCache())
+    for key in ("tree_acc", "token_acc", "errors", "greedy_tree_acc"):
+        assert reused[key] == trained[key]

@@ -287,6 +287,27 @@ def test_beam_search_reports_the_networks_own_probabilities_and_mostly_beats_gre
     assert sum(gains) > 0 and sum(g > -1e-6 for g in gains) >= 0.75 * len(gains)
 
 
+def test_a_root_cost_puts_the_question_the_text_says_to_ask_first_at_the_root(one_torch_thread):
+    """root_cost is paid in the search, at the first step: the beam then returns a tree under the
+    stated root, with the network's own probabilities, and a text that names no first question
+    decodes as without the cost."""
+    from nl2policy.language.stated_rules import first_question
+
+    specs = load_corpus("taxi")
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, beam=3)
+    model = fit("taxi", "one", cfg, [(s.description, s.tree) for s in specs[:48]], seed=0)
+    stated = [s.description for s in specs[48:] if first_question("taxi", s.description)][:12]
+    silent = [s.description for s in specs[48:] if not first_question("taxi", s.description)][:12]
+    free = model.predict(stated + silent)
+    model.root_cost = 100.0
+    costed = model.predict(stated + silent)
+    for text, (tree, probs) in zip(stated, costed):
+        assert tree.question == first_question("taxi", text)
+        _assert_teacher_forced(model, text, tree, probs)
+    assert costed[len(stated):] == free[len(stated):]
+    assert sum(a[0] != b[0] for a, b in zip(free, costed)) > 0  # the smoke model does not find all roots itself
+
+
 @pytest.mark.parametrize("coverage", [False, True])
 def test_early_leaf_cost_grows_trees_and_reports_the_networks_own_probabilities(coverage, one_torch_thread):
     """The cost changes which tree the beam keeps, not the probabilities it reports: a prohibitive

@@ -139,6 +139,11 @@ def translation_experiment(
     summarize_only: bool = typer.Option(False, help="Only rewrite the tables from the folds already in runs.jsonl"),
     workers: int = typer.Option(1, min=1, help="Processes training an ensemble's members side by side (one thread "
                                                "each): same results, less wall time on a machine with as many cores"),
+    keep_networks: Optional[Path] = typer.Option(None, help="Also save each fold's networks in this folder, to study "
+                                                            "decoding choices on them without retraining"),
+    networks_from: Optional[Path] = typer.Option(None, help="A --keep-networks folder: a fold whose networks are there "
+                                                           "(same fold, a model that trains the same networks) decodes "
+                                                           "them instead of training"),
 ) -> None:
     """Cross-validation and leave-writers-out accuracy of every translator (resumable)."""
     import torch
@@ -162,7 +167,8 @@ def translation_experiment(
         err.print(f"[red]error:[/red] no folds to summarise: {out / 'runs.jsonl'} does not exist (run without --summarize-only first)")
         raise typer.Exit(2)
     if not summarize_only:
-        run_experiment(steps, out, progress=lambda msg: err.print(f"fold: {msg}", highlight=False), workers=workers)
+        run_experiment(steps, out, progress=lambda msg: err.print(f"fold: {msg}", highlight=False), workers=workers,
+                       keep_networks=keep_networks, networks_from=networks_from)
     md = summarize(out, command, "one CPU thread per training process (with --workers N, an ensemble's members train in N such "
                                  "processes: the same networks, less wall time); model seed = CV repeat index (ensemble member m: + m); "
                                  "augmentation/synthetic seed 0 (with member_draws, member m: seed m); "

@@ -10,15 +10,15 @@ from __future__ import annotations
 
 import math
 from functools import partial
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Optional
 
 import torch
 
 from nl2policy.domains import get_domain
-from nl2policy.language.grammar import allowed_tokens, next_slot
+from nl2policy.language.grammar import Slot, allowed_tokens, next_slot
 from nl2policy.language.mentions import named_actions, named_questions, unasked_questions, unmet_mentions
 from nl2policy.language.models.network import Batch, StackedDecoder
-from nl2policy.language.stated_rules import broken_rules, stated_rules
+from nl2policy.language.stated_rules import broken_rules, first_question, stated_rules
 from nl2policy.trees import Tree, from_tokens
 
 if TYPE_CHECKING:
@@ -37,7 +37,9 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
     pays that many nats for each action the text names (language/mentions.py) that the tree
     never takes, with a `question_cost`, that many for each question the text asks that the
     tree never does, and with a `rule_cost`, that many for each rule the text states that the tree
-    breaks (language/stated_rules.py)."""
+    breaks (language/stated_rules.py). A `root_cost` is paid inside the search, at the first step,
+    by every root but the question the text says to ask first (stated_rules.first_question), so the
+    beam explores trees under the stated root rather than only rejecting others at the end."""
     vocab = get_domain(model.domain).vocab
     names = model.tree_tokens
     index = {t: i for i, t in enumerate(names)}
@@ -46,25 +48,32 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
     mention_cost = model.cfg.mention_cost if model.mention_cost is None else model.mention_cost
     question_cost = model.cfg.question_cost if model.question_cost is None else model.question_cost
     rule_cost = model.cfg.rule_cost if model.rule_cost is None else model.rule_cost
+    root_cost = model.cfg.root_cost if model.root_cost is None else model.root_cost
     B, K = len(texts), max(1, model.beam or model.cfg.beam)
     state = DecoderState(model, batch, copies=K)
     prefixes: list[list[str]] = [[] for _ in range(B * K)]
     probs: list[dict[int, float]] = [{} for _ in range(B * K)]
     score = torch.full((B, K), -math.inf)
     score[:, 0] = 0.0  # the copies start identical: only the first may expand
-    for _ in range(MAX_STEPS):
-        slots = [next_slot(p, vocab) for p in prefixes]
+    # hypotheses share prefixes and slots: each is read once per search, not walked from the root
+    # for every hypothesis at every step
+    slot_after: dict[tuple[str, ...], Optional[Slot]] = {}
+    allowed: dict[Optional[Slot], torch.Tensor] = {None: torch.arange(len(names)) == 0}  # finished: a placeholder
+    for step in range(MAX_STEPS):
+        slots = []
+        for prefix in map(tuple, prefixes):
+            if prefix not in slot_after:
+                slot_after[prefix] = next_slot(prefix, vocab)
+            slots.append(slot_after[prefix])
         if all(s is None for s in slots):
             break
-        mask = torch.zeros(B * K, len(names), dtype=torch.bool)
-        parent = torch.full((B * K,), -1, dtype=torch.long)
-        branch = torch.zeros(B * K, dtype=torch.long)
-        for r, s in enumerate(slots):
-            if s is None:
-                mask[r, 0] = True  # finished: one placeholder continuation at no cost
-                continue
-            mask[r, [index[a] for a in allowed_tokens(s, vocab)]] = True
-            parent[r], branch[r] = s.parent, s.branch
+        for s in slots:
+            if s not in allowed:
+                allowed[s] = torch.zeros(len(names), dtype=torch.bool)
+                allowed[s][[index[a] for a in allowed_tokens(s, vocab)]] = True
+        mask = torch.stack([allowed[s] for s in slots])  # a finished hypothesis continues at no cost
+        parent = torch.tensor([-1 if s is None else s.parent for s in slots])
+        branch = torch.tensor([0 if s is None else s.branch for s in slots])
         logits = state.step(parent, branch)  # (members, B*K, tokens)
         p = torch.softmax(logits.masked_fill(~mask, -1e9), -1).mean(0)
         done = torch.tensor([s is None for s in slots])
@@ -72,6 +81,11 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
         if leaf_cost:
             early = (mask & ~is_action).any(-1, keepdim=True)  # a question was allowed here
             logp = logp - leaf_cost * (early & is_action)
+        if root_cost and step == 0:  # the root: where the text says which question comes first
+            for b, text in enumerate(texts):
+                first = first_question(model.domain, text)
+                if first is not None:
+                    logp[b * K:(b + 1) * K] -= root_cost * (torch.arange(len(names)) != index[first])
         logp[done] = torch.where(mask[done], 0.0, -math.inf)
         total = (score.view(B * K, 1) + logp).view(B, K * len(names))
         best, flat = total.topk(K, -1)  # ties keep the lower index: greedy's argmax when K = 1
@@ -89,9 +103,10 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
     trees = [from_tokens(p, vocab) if p and next_slot(p, vocab) is None else None for p in prefixes]
     # the final choice's checks: (cost, what the text names, what of it a tree leaves out)
     asked = partial(named_questions, forms=model.cfg.question_forms)
+    stated = partial(stated_rules, forms=model.cfg.rule_forms)
     for cost, named_in, left_out in ((mention_cost, named_actions, unmet_mentions),
                                      (question_cost, asked, unasked_questions),
-                                     (rule_cost, stated_rules, broken_rules)):
+                                     (rule_cost, stated, broken_rules)):
         if not cost:
             continue
         for b, text in enumerate(texts):

@@ -19,9 +19,10 @@ import torch
 from nl2policy.domains import get_domain
 from nl2policy.language.corpus import Spec, kfold, load_corpus
 from nl2policy.language.dataset import member_pairs
-from nl2policy.language.models.config import MODELS
+from nl2policy.language.models.config import MODELS, networks_config
+from nl2policy.language.text import WordVocab
 from nl2policy.language.models.pretrained import MiniLMCache
-from nl2policy.language.train import fit
+from nl2policy.language.train import TrainedTranslator, fit
 from nl2policy.language.translate import LOW_CONFIDENCE, tree_probability
 from nl2policy.trees import GRID_SLOTS, Tree, TreeError, to_grid, to_tokens
 from nl2policy.trees.parse import validate
@@ -35,6 +36,7 @@ DECODING_ALTERNATIVES = {"greedy_tree_acc": ("beam", 1, "greedy (beam of 1)"),
                          "no_question_cost_tree_acc": ("question_cost", 0.0, "no question-mention check"),
                          "question_cost_1_tree_acc": ("question_cost", 1.0, "question-mention check at 1 nat"),
                          "no_rule_cost_tree_acc": ("rule_cost", 0.0, "no stated-rule check"),
+                         "no_root_cost_tree_acc": ("root_cost", 0.0, "no stated-first-question check"),
                          "first_3_members_tree_acc": ("ensemble", 3, "its first 3 members"),
                          "first_4_members_tree_acc": ("ensemble", 4, "its first 4 members"),
                          "first_5_members_tree_acc": ("ensemble", 5, "its first 5 members")}
@@ -71,11 +73,28 @@ def unseen_trees(specs: Sequence[Spec], train_idx: Sequence[int], test_idx: Sequ
 
 
 def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_idx: Sequence[int], name: str,
-             seed: int, cache: MiniLMCache, workers: int = 1) -> dict:
+             seed: int, cache: MiniLMCache, workers: int = 1, keep: Optional[Path] = None,
+             reuse: Optional[dict] = None) -> dict:
+    """Train `name` on one fold and score it on the held-out descriptions. `keep`: also save the
+    fold's networks there (with their word vocabulary and the fold's indices), so decoding
+    choices can be studied on them later without retraining. `reuse`: such a saved fold (same
+    fold, a model with the same training: `kept_networks`), decoded instead of training anew."""
     start = time.time()
-    pairs = member_pairs(domain, specs, train_idx, MODELS[name])
-    model = fit(domain, name, MODELS[name], pairs, seed, cache=cache,
-                vocab_texts=[specs[i].description for i in train_idx], workers=workers)
+    cfg = MODELS[name]
+    pairs = member_pairs(domain, specs, train_idx, cfg)
+    if reuse is not None:
+        model = TrainedTranslator(domain, name, cfg, WordVocab(reuse["words"]), [], cache)
+        for state in reuse["nets"][:cfg.ensemble]:
+            net = model.new_net()
+            net.load_state_dict(state)
+            model.nets.append(net.eval())
+    else:
+        model = fit(domain, name, cfg, pairs, seed, cache=cache,
+                    vocab_texts=[specs[i].description for i in train_idx], workers=workers)
+    if keep is not None:
+        keep.parent.mkdir(parents=True, exist_ok=True)
+        torch.save({"domain": domain, "name": name, "words": model.words.itos[2:], "machine": machine(),
+                    "nets": [net.state_dict() for net in model.nets], "train": list(train_idx), "test": list(test_idx)}, keep)
     texts = [specs[i].description for i in test_idx]
     decoded = model.predict(texts)
     preds = [t for t, _ in decoded]
@@ -124,10 +143,13 @@ def plan_folds(specs: Sequence[Spec], protocol: str, repeats: int) -> list[tuple
 
 
 def run_experiment(plan: Sequence[tuple[str, str, str, int]], out: Path,
-                   progress: Optional[Callable[[str], None]] = None, workers: int = 1) -> Path:
+                   progress: Optional[Callable[[str], None]] = None, workers: int = 1,
+                   keep_networks: Optional[Path] = None, networks_from: Optional[Path] = None) -> Path:
     """`plan`: (domain, model, protocol, repeats). Appends each fold to out/runs.jsonl.
     `workers`: processes training an ensemble's members side by side (train.fit); the folds'
-    results are the same as with one, only the recorded seconds change."""
+    results are the same as with one, only the recorded seconds change. `keep_networks`: a folder
+    to save each fold's networks in (DOMAIN-MODEL-FOLD.pt); `networks_from`: such a folder, whose
+    networks a fold decodes instead of training where they fit it (kept_networks)."""
     torch.set_num_threads(1)
     out.mkdir(parents=True, exist_ok=True)
     runs = out / "runs.jsonl"
@@ -142,12 +164,35 @@ def run_experiment(plan: Sequence[tuple[str, str, str, int]], out: Path,
             if progress:
                 progress(f"{domain} {name} {key}")
             seed = int(key.split("-r")[1][0]) if "-r" in key else 0
-            result = run_fold(domain, specs, tr, te, name, seed, cache, workers)
-            result.update(domain=domain, model=name, fold=key, protocol=protocol, machine=machine(), workers=workers)
+            keep = keep_networks / f"{domain}-{name}-{key}.pt" if keep_networks else None
+            reuse = kept_networks(networks_from, domain, name, key, tr, te) if networks_from else None
+            result = run_fold(domain, specs, tr, te, name, seed, cache, workers, keep, reuse)
+            result.update(domain=domain, model=name, fold=key, protocol=protocol, workers=workers,
+                          machine=reuse["machine"] if reuse else machine())
+            if reuse:
+                result["networks_from"] = reuse["name"]
             with runs.open("a") as fh:
                 fh.write(json.dumps(result) + "\n")
             done.add((domain, name, key))  # a later plan step (e.g. cv3 after cv1) must not redo it
     return runs
+
+
+def kept_networks(folder: Path, domain: str, name: str, key: str, train_idx: Sequence[int],
+                  test_idx: Sequence[int]) -> Optional[dict]:
+    """A fold's saved networks (run_fold's `keep`) that `name` can decode as its own, or None: the
+    same fold, trained by a model whose training is `name`'s (networks_config: the two differ in
+    decoding choices only) with at least as many members (member m trains with seed s + m
+    whatever the ensemble's size, so the first members of a larger one are a smaller one's).
+    Networks retrain bit for bit only on the kind of CPU that trained them, so the fold keeps
+    the machine recorded with them."""
+    want = networks_config(MODELS[name])
+    for path in sorted(folder.glob(f"{domain}-*-{key}.pt")):
+        saved = torch.load(path, weights_only=False)
+        if saved["domain"] == domain and saved["name"] in MODELS and networks_config(MODELS[saved["name"]]) == want \
+                and saved["train"] == list(train_idx) and saved["test"] == list(test_idx) \
+                and len(saved["nets"]) >= MODELS[name].ensemble:
+            return saved
+    return None
 
 
 def read_runs(path: Path) -> list[dict]:

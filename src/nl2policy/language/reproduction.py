@@ -40,6 +40,8 @@ def reproduction_checks(runs: list[dict]) -> dict[tuple[str, str], tuple[int, in
     index = {(r["domain"], r["model"], r["fold"]): r for r in runs}
     checks: dict[tuple[str, str], tuple[int, int]] = {}
     for r in runs:
+        if "networks_from" in r:  # decoded another model's saved networks: no retraining to check
+            continue
         for key in DECODING_ALTERNATIVES:
             if key not in r:
                 continue
@@ -64,8 +66,10 @@ def decoded_as(model: str, key: str) -> list[str]:
 
 def _decodes_as(cfg: ModelConfig) -> ModelConfig:
     """`cfg` with the settings that change nothing set to their defaults: without a question check,
-    which patterns it would use."""
-    return cfg if cfg.question_cost else replace(cfg, question_forms=ModelConfig.question_forms)
+    which patterns it would use; without a rule check, which statements it would read."""
+    if not cfg.question_cost:
+        cfg = replace(cfg, question_forms=ModelConfig.question_forms)
+    return cfg if cfg.rule_cost else replace(cfg, rule_forms=ModelConfig.rule_forms)
 
 
 def machine_kinds(checks: dict[tuple[str, str], tuple[int, int]], labels: dict[str, str]) -> dict[str, str]:

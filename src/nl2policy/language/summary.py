@@ -54,6 +54,7 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
         row = {"domain": domain, "model": model, "protocol": protocol, "folds": len(rs),
                "all_valid": all(r["valid"] == r["n"] for r in rs), "train_pairs": rs[0]["train_pairs"],
                "seconds_per_fold": round(mean(r["seconds"] for r in rs), 1),
+               "reused": all("networks_from" in r for r in rs),
                "machines": {m: n for m in labels if (n := sum(fold_machine(r) == m for r in rs))}}
         for m in ("tree_acc", "token_acc", "policy_acc"):
             vals = [100 * r[m] for r in rs]
@@ -68,13 +69,17 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
              "Machines (folds retrain bit for bit only on the kind of CPU that first ran them; seconds per fold "
              "depend on it and on the worker processes): " + "; ".join(f"{label} = {m}" for m, label in labels.items()) + ".",
              *reproduction_lines(checks, kinds, labels), "",
+             *(["\\* decoded the networks another model trained on the same folds (translation-experiment "
+                "--networks-from, evaluate.kept_networks): seconds of decoding only.", ""]
+               if any(r["reused"] for r in rows) else []),
              "| domain | model | protocol | folds | tree acc | token acc | policy acc | all outputs valid | train pairs | s/fold | machine |",
              "|---|---|---|---:|---:|---:|---:|---|---:|---:|---|"]
     for r in rows:
         cell = lambda m: f"{r[m]['mean']:.2f} ({r[m]['std']:.2f})"
         lines.append(f"| {r['domain']} | {r['model']} | {r['protocol']} | {r['folds']} | {cell('tree_acc')} | "
                      f"{cell('token_acc')} | {cell('policy_acc')} | {'yes' if r['all_valid'] else 'NO'} | "
-                     f"{r['train_pairs']} | {r['seconds_per_fold']} | {_machine_cell(r['machines'], labels)} |")
+                     f"{r['train_pairs']} | {r['seconds_per_fold']}{' *' if r['reused'] else ''} | "
+                     f"{_machine_cell(r['machines'], labels)} |")
     lines += _against_paper(rows)
     lines += _writer_breakdown(runs)
     lines += _decoding_effects(runs)

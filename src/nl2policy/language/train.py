@@ -55,6 +55,7 @@ class TrainedTranslator:
     mention_cost: Optional[float] = None  # decoding cost of a named action the tree lacks (see ModelConfig); None: the config's
     question_cost: Optional[float] = None  # decoding cost of an asked question the tree lacks (see ModelConfig); None: the config's
     rule_cost: Optional[float] = None  # decoding cost of a stated rule the tree breaks (see ModelConfig); None: the config's
+    root_cost: Optional[float] = None  # decoding cost of a root other than the stated first question; None: the config's
     ensemble: Optional[int] = None  # decode with the first n networks only; None: all of them
     stack_members: bool = True  # flat encoders: decode all members as one batch (False: one by one, same result)
 
@@ -92,7 +93,8 @@ class TrainedTranslator:
     def predict(self, texts: Sequence[str], batch_size: int = 64) -> list[tuple[Tree, dict[int, float]]]:
         """Grammar-constrained decoding (beam search, greedy when `beam` is 1). Returns (tree, {grid slot: probability})."""
         for net in self.nets:
-            net.eval()
+            if net.training:  # eval() walks every submodule: a cost per call otherwise
+                net.eval()
         out = []
         decode = self._decode_paths if self.cfg.decoder == "path" else self._decode
         for i in range(0, len(texts), batch_size):

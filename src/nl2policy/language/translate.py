@@ -6,7 +6,8 @@ other domain still gets a (valid) tree, but with a low confidence and a warning 
 so no caller mistakes it for a confident answer. A tree that never takes an action the text
 plainly names ("drive to the city"), or never asks a question the text asks ("if it is in the
 city"), is flagged too: the writers' own trees almost never do that (language/mentions.py), so it
-points at the branch to check.
+points at the branch to check. So is a tree that breaks a rule the text states, or that asks
+another question first than the one the text says to ask first (language/stated_rules.py).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from nl2policy.language.members import default_workers, is_current
 from nl2policy.language.mentions import unasked_questions, unmet_mentions
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS, ModelConfig
 from nl2policy.language.models.pretrained import MiniLMCache
-from nl2policy.language.stated_rules import broken_rules
+from nl2policy.language.stated_rules import broken_rules, first_question
 from nl2policy.language.text import WordVocab, tokenize
 from nl2policy.language.train import TrainedTranslator, fit
 from nl2policy.trees import Tree, tree_to_json
@@ -209,6 +210,12 @@ def translate(domain: str, text: str, name: str = DEFAULT_MODEL) -> Translation:
     for question in sorted(unasked_questions(domain, text, tree, forms="extended")):
         asked = get_domain(domain).vocab.questions[question].rstrip("?").lower()
         warnings.append(f"the description asks \"{asked}?\" ({question}), but the tree never does: check where it should")
-    for rule in broken_rules(domain, text, tree):
-        warnings.append(f"the description says \"{rule.text}\", but the tree never does that there: check that branch")
+    for rule in broken_rules(domain, text, tree, forms="extended"):  # like the questions: all forms, whatever the model's check reads
+        does = "does not always do that there" if rule.every else "never does that there"
+        warnings.append(f"the description says \"{rule.text}\", but the tree {does}: check that branch")
+    first = first_question(domain, text)
+    if first is not None and getattr(tree, "question", None) != first:
+        said = get_domain(domain).vocab.questions[first].rstrip("?").lower()
+        warnings.append(f"the description says to ask first \"{said}?\" ({first}), but the tree asks something else "
+                        "first: check its top")
     return Translation(tree, confidence, warnings, {k: v * factor for k, v in node_probs.items()})

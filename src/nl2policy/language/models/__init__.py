@@ -29,8 +29,13 @@ beam's trees also pays 1 nat per question the text asks that the tree never asks
 mentions.named_questions);
 seq2tree-minilm-synth-x4-mentions-questions-ext = the same networks, the question check finding
 questions by their extended forms too (list headers, code) and paying 2 nats for each;
-seq2tree-minilm-synth-x4-mentions-questions-ext-rules (the default) = the model above, whose final
+seq2tree-minilm-synth-x4-mentions-questions-ext-rules = the model above, whose final
 choice also keeps away from a tree that breaks a rule the text states (language/stated_rules.py);
+seq2tree-minilm-synth-x4-mentions-questions-ext-rules-ext = the same, the rules also read by their
+extended forms ("..., no matter what" holds in every state under it; "At the airport? Drive to the city");
+seq2tree-minilm-synth-x4-mentions-questions-ext-rules-ext-root (the default) = the model above, whose beam also
+pays 5 nats at the root for any question but the one the text says to ask first
+(stated_rules.first_question);
 seq2tree-minilm-synth-x6-mentions-questions-ext-rules (measured) = the default's checks on the six
 members of seq2tree-minilm-synth-x6-mentions (over the training budget);
 seq2tree-minilm-synth-x4-mentions-rerun and -rerun2 = not changes: the default's recipe with other
