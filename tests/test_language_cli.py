@@ -135,25 +135,27 @@ def _rule_warnings(monkeypatch, tree: dict, text: str) -> list[str]:
     return [w for w in tr.translate("taxi", text, "smoke").warnings if "that there" in w]
 
 
-def test_a_tree_that_breaks_a_rule_the_text_states_is_flagged(home, monkeypatch):
-    """The warning quotes each rule the text states that no branch of the tree follows (stated_rules.py)."""
-    habit = {"if": "has_passenger", "yes": {"do": "go_airport"},
-             "no": {"if": "at_village", "yes": {"do": "wait"}, "no": {"do": "go_village"}}}
-    assert _rule_warnings(monkeypatch, habit, "With a passenger, drive to the airport. In the village, wait. "
-                                              "No passenger and not in the village: go to the city.") == [
-        'the description says "No passenger and not in the village: go to the city", but the tree never does that '
-        'there: check that branch']
+_HABIT = {"if": "has_passenger", "yes": {"do": "go_airport"},
+          "no": {"if": "at_village", "yes": {"do": "wait"}, "no": {"do": "go_village"}}}
+_ASKS = {"if": "heavy_traffic", "yes": {"do": "go_village"},
+         "no": {"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_city"}}}
 
 
-def test_a_tree_that_does_not_always_follow_a_quantified_rule_is_flagged(home, monkeypatch):
-    """"..., no matter what": the warning quotes the rule when some branch under its condition does
-    something else (stated_rules.py, extended forms), whatever forms the model's own check reads."""
-    asks = {"if": "heavy_traffic", "yes": {"do": "go_village"},
-            "no": {"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_city"}}}
-    assert _rule_warnings(monkeypatch, asks, "When the road is jammed, go to the village. When it's clear, drive to "
-                                             "the city, no matter what.") == [
-        'the description says "When it\'s clear, drive to the city, no matter what", but the tree does not always do '
-        'that there: check that branch']
+@pytest.mark.parametrize("tree, text, warning", [
+    # a plain rule that no branch of the tree follows
+    (_HABIT, "With a passenger, drive to the airport. In the village, wait. No passenger and not in the village: go "
+             "to the city.",
+     'the description says "No passenger and not in the village: go to the city", but the tree never does that there: '
+     'check that branch'),
+    # "..., no matter what": some branch under its condition does something else (extended forms,
+    # whatever forms the model's own check reads)
+    (_ASKS, "When the road is jammed, go to the village. When it's clear, drive to the city, no matter what.",
+     'the description says "When it\'s clear, drive to the city, no matter what", but the tree does not always do that '
+     'there: check that branch'),
+])
+def test_a_tree_that_breaks_a_rule_the_text_states_is_flagged(home, monkeypatch, tree, text, warning):
+    """The warning quotes each rule the text states that the tree breaks (stated_rules.py)."""
+    assert _rule_warnings(monkeypatch, tree, text) == [warning]
 
 
 def test_a_tree_that_asks_another_question_first_than_the_text_says_is_flagged(home, monkeypatch):
