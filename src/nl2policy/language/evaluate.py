@@ -20,7 +20,6 @@ from nl2policy.domains import get_domain
 from nl2policy.language.corpus import Spec, kfold, load_corpus
 from nl2policy.language.dataset import member_pairs
 from nl2policy.language.models.config import MODELS, networks_config
-from nl2policy.language.text import WordVocab
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.train import TrainedTranslator, fit
 from nl2policy.language.translate import LOW_CONFIDENCE, tree_probability
@@ -83,11 +82,7 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     cfg = MODELS[name]
     pairs = member_pairs(domain, specs, train_idx, cfg)
     if reuse is not None:
-        model = TrainedTranslator(domain, name, cfg, WordVocab(reuse["words"]), [], cache)
-        for state in reuse["nets"][:cfg.ensemble]:
-            net = model.new_net()
-            net.load_state_dict(state)
-            model.nets.append(net.eval())
+        model = TrainedTranslator.from_states(domain, name, cfg, reuse["words"], reuse["nets"][:cfg.ensemble], cache)
     else:
         model = fit(domain, name, cfg, pairs, seed, cache=cache,
                     vocab_texts=[specs[i].description for i in train_idx], workers=workers)

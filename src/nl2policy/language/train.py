@@ -64,6 +64,18 @@ class TrainedTranslator:
         """The first network (the only one unless the config asks for an ensemble)."""
         return self.nets[0]
 
+    @classmethod
+    def from_states(cls, domain: str, name: str, cfg: ModelConfig, words: Sequence[str], states: Sequence[dict],
+                    cache: MiniLMCache) -> TrainedTranslator:
+        """A translator from saved networks: its word vocabulary (`words.itos[2:]`, as saved) and
+        each network's state dict, in eval mode (a saved model file, a fold's kept networks)."""
+        model = cls(domain, name, cfg, WordVocab(words), [], cache)
+        for state in states:
+            net = model.new_net()
+            net.load_state_dict(state)
+            model.nets.append(net.eval())
+        return model
+
     def new_net(self) -> Translator:
         vocab = get_domain(self.domain).vocab
         return Translator(self.cfg, len(self.words), len(self.tree_tokens), len(vocab.question_ids))

@@ -30,7 +30,7 @@ from nl2policy.language.mentions import unasked_questions, unmet_mentions
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS, ModelConfig
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.stated_rules import broken_rules, first_question
-from nl2policy.language.text import WordVocab, tokenize
+from nl2policy.language.text import tokenize
 from nl2policy.language.train import TrainedTranslator, fit
 from nl2policy.trees import Tree, tree_to_json
 
@@ -137,11 +137,9 @@ class LoadedModel:
 def load_model(path: Path) -> LoadedModel:
     data = torch.load(path, weights_only=False)
     cfg = ModelConfig(**data["cfg"])
-    translator = TrainedTranslator(data["domain"], data["name"], cfg, WordVocab(data["words"]), [], MiniLMCache(max_items=256))
-    for state in data["nets"] if "nets" in data else [data["net"]]:  # "net": files from before ensembles
-        net = translator.new_net()
-        net.load_state_dict(state)
-        translator.nets.append(net.eval())
+    states = data["nets"] if "nets" in data else [data["net"]]  # "net": files from before ensembles
+    translator = TrainedTranslator.from_states(data["domain"], data["name"], cfg, data["words"], states,
+                                               MiniLMCache(max_items=256))
     return LoadedModel(translator, {d: set(ws) for d, ws in data["lexicon"].items()})
 
 
