@@ -112,8 +112,8 @@ def main() -> None:
         translator.encode(spec.description)  # the MiniLM features alone, for the split below
         features.append(1000 * (time.perf_counter() - t0))
     latencies = sorted(latency["asked"])
-    # side by side (MiniLM cached, rounds interleaved): the ensemble's decoder as one stacked batch
-    # vs member by member, the config's beam vs greedy decoding, and with vs without each of the
+    # side by side (MiniLM cached, rounds interleaved): the ensemble's encoders and decoders as one
+    # stacked batch vs member by member, the config's beam vs greedy decoding, and with vs without each of the
     # config's checks (the translator's overrides of its config; None: the config's own). What the
     # patterns find in a text is cached (mentions.TEXTS_CACHED), so after a text's first round these
     # time the checks of the beam's trees; the reading of a new text is in the latency above, once
@@ -158,7 +158,7 @@ def main() -> None:
              f"{statistics.median(latency['torch default']):.1f} ms",
              f"of which MiniLM features (tokenize, run, align to words): median {statistics.median(features):.1f} ms",
              f"network part ({len(translator.nets)} members, beam {translator.cfg.beam}, MiniLM cached), rounds "
-             f"interleaved: stacked decoder median {net['stacked']:.2f} ms vs member by member "
+             f"interleaved: stacked encoders and decoders median {net['stacked']:.2f} ms vs member by member "
              f"{net['member by member']:.2f} ms -> {net['member by member'] / net['stacked']:.2f}x; "
              f"greedy (stacked) {net['stacked, greedy']:.2f} ms: the beam costs {net['stacked'] / net['stacked, greedy']:.2f}x; "
              f"without the mention check (mention cost {translator.cfg.mention_cost}) "

@@ -168,3 +168,18 @@ def test_a_tree_that_asks_another_question_first_than_the_text_says_is_flagged(h
         'the description says to ask first "does the taxi have a passenger?" (has_passenger), but the tree asks '
         'something else first: check its top']
     assert top("First check whether you are in the city: if so wait, if not drive to the city.") == []
+
+
+def test_highway_warnings_name_the_question_without_its_note(home, monkeypatch):
+    """Highway's questions are read too (mentions.py, stated_rules.first_question); a warning quotes
+    the dictionary's question without the note after it."""
+    tree = parse_tree({"if": "car_ahead_close", "yes": {"do": "slower"}, "no": {"do": "faster"}}, get_domain("highway").vocab)
+    loaded = tr.get_model("highway", "smoke")
+    monkeypatch.setattr(loaded.translator, "predict", lambda texts: [(tree, {0: 0.9, 1: 0.9, 2: 0.9})])
+    said = tr.translate("highway", "First check whether the lane to the right is free: if it is, move right. "
+                                   "If not, slow down when a car is close in front, else speed up.", "smoke")
+    assert [w for w in said.warnings if "(right_lane_free)" in w] == [
+        'the description asks "is the lane to my right free?" (right_lane_free), but the tree never does: check where it '
+        'should',
+        'the description says to ask first "is the lane to my right free?" (right_lane_free), but the tree asks '
+        'something else first: check its top']

@@ -97,7 +97,7 @@ def test_unasked_questions_are_the_asked_questions_the_tree_never_asks():
     text = "With a passenger, drive to the airport. If you're already in the city, wait; if not, drive to the city."
     assert unasked_questions("taxi", text, tree) == {"at_city"}
     assert unasked_questions("taxi", "Got a passenger? Drive to the airport.", tree) == set()
-    assert named_questions("highway", "If the left lane is free, move left.") == set()  # no patterns yet
+    assert named_questions("highway", "If the left lane is free, move left.") == {"left_lane_free"}
 
 
 @pytest.mark.parametrize("text, questions", [
@@ -130,24 +130,48 @@ def test_unknown_question_forms_are_refused():
         named_questions("taxi", "If it is in the city, wait.", "everything")
 
 
-@pytest.mark.parametrize("forms, recall", [("conditions", 0.7), ("extended", 0.9)])
-def test_writers_trees_almost_always_ask_every_question_their_text_asks(forms, recall):
+@pytest.mark.parametrize("text, questions", [
+    ("If there is a car close in front, slow down; if the lane to the right is free, move right.",
+     {"car_ahead_close", "right_lane_free"}),
+    ("When someone is tailgating me, move over if I'm not in the rightmost lane.", {"car_behind_close", "in_right_lane"}),
+    ("If the car is already driving fast, keep the lane.", {"going_fast"}),
+    ("if it's in the leftmost lane, change right", {"in_left_lane"}),
+    # actions, and reasons, are not conditions
+    ("Keep right, speed up, and slow down if the left lane is blocked.", set()),
+    ("Driving fast is rewarded, so it speeds up and stays behind nobody.", set()),
+])
+def test_highway_questions_a_text_asks(text, questions):
+    assert named_questions("highway", text) == questions
+
+
+@pytest.mark.parametrize("text, questions", [
+    ("rightFree? -> change to the right lane\nnope ->\n    bumperAhead? -> slow down", {"right_lane_free", "car_ahead_close"}),
+    ("tailgated, move right or speed up; car close ahead: slow down", {"car_behind_close", "car_ahead_close"}),
+    ("car close ahead: go right if that's free, else slow down", {"car_ahead_close", "right_lane_free"}),
+    ("if (inRightmost) { fast ? keep lane : speed up }", {"in_right_lane", "going_fast"}),
+    ("if lane == leftmost then move right", {"in_left_lane"}),
+    # reasons and goals, not conditions
+    ("It speeds up when the left lane is blocked or it is already in the rightmost lane.", set()),
+    ("The car is rewarded for going fast and for staying right; never tailgate.", set()),
+])
+def test_highway_questions_the_extended_forms_find(text, questions):
+    assert named_questions("highway", text, "extended") == questions
+    assert named_questions("highway", text) <= questions
+
+
+@pytest.mark.parametrize("domain, forms, most_wrong, recall", [
+    ("taxi", "conditions", 4, 0.7), ("taxi", "extended", 4, 0.9),
+    ("highway", "conditions", 2, 0.65), ("highway", "extended", 2, 0.9),
+])
+def test_writers_trees_almost_always_ask_every_question_their_text_asks(domain, forms, most_wrong, recall):
     """The precision the question check rests on (mentions.py's docstring): a question the patterns
-    find is missing from the writer's own tree in at most 4 of 200 taxi descriptions, while they find
-    at least 70% (the conditions) or 90% (the extended forms) of the questions the trees ask."""
-    specs = load_corpus("taxi")
-    named = {s.id: named_questions("taxi", s.description, forms) for s in specs}
-    assert sum(bool(named[s.id] - questions_used(s.tree)) for s in specs) <= 4
+    find is missing from the writer's own tree in at most 4 of 200 taxi and 2 of 200 highway
+    descriptions, while they find at least the given share of the questions the trees ask."""
+    specs = load_corpus(domain)
+    named = {s.id: named_questions(domain, s.description, forms) for s in specs}
+    assert sum(bool(named[s.id] - questions_used(s.tree)) for s in specs) <= most_wrong
     asked = [(q, s) for s in specs for q in questions_used(s.tree)]
     assert sum(q in named[s.id] for q, s in asked) >= recall * len(asked)
-
-
-def test_no_highway_description_asks_a_question_the_check_finds():
-    """Why the default decodes highway as its networks do (results/translation/README.md): the
-    question check, with either forms, finds nothing in any highway description, so it changes no
-    highway tree."""
-    specs = load_corpus("highway")
-    assert not any(named_questions("highway", s.description, forms) for s in specs for forms in ("conditions", "extended"))
 
 
 def test_findings_are_cached_and_immutable():

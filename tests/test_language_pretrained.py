@@ -35,3 +35,35 @@ def test_a_text_inside_one_window_gets_the_models_usual_states(one_torch_thread)
     assert tokens[0].text.lower() == "drive" and tokenizer.tokenize(text)[0] == "drive"  # one piece, at index 1
     for layer in range(3):
         assert np.allclose(states[layer, 0], usual[layer][0, 1].numpy(), atol=2e-2)
+
+
+def test_the_traced_forward_gives_the_eager_models_states_bit_for_bit(one_torch_thread):
+    """Translation and training read MiniLM through a TorchScript trace (pretrained._forward);
+    it must be the eager model's arithmetic exactly, at any length up to the window (the trace
+    saw one length only)."""
+    import torch
+
+    from nl2policy.language.models.pretrained import _forward, _HiddenStates, _load
+
+    traced, eager = _forward(2), _HiddenStates(_load(2)[1]).eval()
+    assert isinstance(traced, torch.jit.ScriptModule)
+    with torch.inference_mode():
+        for n in (1, 2, 15, 16, 17, 90, MAX_PIECES):
+            ids = torch.randint(1000, 20000, (1, n))
+            assert torch.equal(traced(ids), eager(ids)), n
+
+
+def test_a_forward_that_cannot_be_traced_falls_back_to_the_eager_model(monkeypatch):
+    import torch
+
+    from nl2policy.language.models import pretrained
+
+    def refuse(*args, **kwargs):
+        raise RuntimeError("no tracing here")
+
+    monkeypatch.setattr(torch.jit, "trace", refuse)
+    pretrained._forward.cache_clear()
+    try:
+        assert isinstance(pretrained._forward(2), pretrained._HiddenStates)
+    finally:
+        pretrained._forward.cache_clear()

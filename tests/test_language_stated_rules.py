@@ -81,7 +81,7 @@ def test_a_tree_breaks_a_rule_when_no_state_meeting_its_condition_gets_its_actio
     # context the clause leaves out only narrows the states: "in the village, wait" holds for
     # the empty taxi alone, and the tree that drives a passenger to the airport does not break it
     assert broken_rules("taxi", "In the village, wait.", said) == []
-    assert stated_rules("highway", "If the left lane is free, move left.") == ()  # no patterns yet
+    assert stated_rules("highway", "If the left lane is free, move left.") == ()  # no answer patterns in highway
 
 
 def test_no_writers_tree_breaks_a_rule_its_description_states():
@@ -108,9 +108,21 @@ def test_the_question_a_text_says_to_ask_first(text, first):
     assert first_question("taxi", text) == first
 
 
-def test_no_writers_tree_asks_another_question_first_than_its_description_says():
-    specs = load_corpus("taxi")
-    said = [(s, first_question("taxi", s.description)) for s in specs]
-    assert sum(q is not None for _, q in said) >= 50
+@pytest.mark.parametrize("text, first", [
+    ("First, check whether there is a car close in front, in the same lane.", "car_ahead_close"),
+    ("The first thing it checks is whether it is in the rightmost lane.", "in_right_lane"),
+    ("It starts by looking behind: if someone is tailgating, move right.", "car_behind_close"),
+    # after the easy case, a "first" is inside the other branch
+    ("If the road in front is clear, speed up. When it isn't, first try the left: if that lane is free, go left.", None),
+    ("Its first priority is speed: it speeds up whenever the road in front is clear.", None),
+])
+def test_the_question_a_highway_text_says_to_ask_first(text, first):
+    assert first_question("highway", text) == first
+
+
+@pytest.mark.parametrize("domain, at_least", [("taxi", 50), ("highway", 35)])
+def test_no_writers_tree_asks_another_question_first_than_its_description_says(domain, at_least):
+    specs = load_corpus(domain)
+    said = [(s, first_question(domain, s.description)) for s in specs]
+    assert sum(q is not None for _, q in said) >= at_least
     assert [s.id for s, q in said if q is not None and q != getattr(s.tree, "question", None)] == []
-    assert first_question("highway", "First check whether the left lane is free.") is None  # no patterns yet

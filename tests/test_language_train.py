@@ -240,6 +240,31 @@ def test_stacked_decoder_step_equals_each_members_own_step(name, coverage, one_t
             assert torch.allclose(added.sum(-1), torch.ones(3, B), atol=1e-5) and bool((added[:, ~mask] == 0).all())
 
 
+@pytest.mark.parametrize("word_rnn", [True, False])
+def test_stacked_encoder_equals_each_members_own_encoder(word_rnn, one_torch_thread):
+    """On a padded batch (texts of 7, 3, 1 and 5 words): the stacked BiGRU reads each text from
+    its own last word backwards and leaves zeros after it, as the packed nn.GRU does."""
+    from nl2policy.language.models.network import Batch, StackedEncoder, Translator
+
+    torch.manual_seed(0)
+    cfg = dataclasses.replace(MODELS["seq2tree"], hidden=24, embed=12, word_rnn=word_rnn)
+    nets = [Translator(cfg, 30, 10, 6).eval() for _ in range(3)]
+    lengths = torch.tensor([7, 3, 1, 5])
+    inside = torch.arange(7)[None] < lengths[:, None]
+    words = torch.randint(1, 30, (4, 7)) * inside
+    batch = Batch(words, lengths, None, torch.zeros(4, 1, 7, dtype=torch.long), lengths[:, None], torch.zeros(4, 7, dtype=torch.long),
+                  torch.ones(4, dtype=torch.long))
+    with torch.inference_mode():
+        got = StackedEncoder(nets).encode(batch)
+        for g, net in zip(got, nets, strict=True):
+            want = net.encode(batch)
+            assert g.keys() == want.keys()
+            for k in want:
+                assert torch.allclose(g[k], want[k], atol=1e-6), k
+        if word_rnn:
+            assert bool((got[0]["words"][~inside] == 0).all()) and bool((got[0]["words"][inside] != 0).any())
+
+
 @pytest.mark.parametrize("beam,coverage", [(1, False), (3, False), (3, True)])
 def test_stacked_and_member_by_member_decoding_give_the_same_translations(beam, coverage, one_torch_thread):
     specs = load_corpus("highway")

@@ -17,7 +17,7 @@ import torch
 from nl2policy.domains import get_domain
 from nl2policy.language.grammar import Slot, allowed_tokens, next_slot
 from nl2policy.language.mentions import named_actions, named_questions, unasked_questions, unmet_mentions
-from nl2policy.language.models.network import Batch, StackedDecoder
+from nl2policy.language.models.network import Batch, StackedDecoder, StackedEncoder
 from nl2policy.language.stated_rules import broken_rules, first_question, stated_rules
 from nl2policy.trees import Tree, from_tokens
 
@@ -123,14 +123,16 @@ class DecoderState:
     (a node's children are fed its state), the tokens chosen, the last attention context.
 
     Kept as tensors with a step axis, so the beam search reorders hypotheses with one index per
-    tensor. Flat encoders run all members at once (StackedDecoder); the hierarchical one (or
-    any, with `stack_members` off), member by member: same arithmetic."""
+    tensor. Flat encoders run all members at once (StackedEncoder, StackedDecoder); the
+    hierarchical one (or any, with `stack_members` off), member by member: same arithmetic."""
 
     def __init__(self, model: TrainedTranslator, batch: Batch, copies: int = 1) -> None:
         """`copies` hypotheses per description (rows b*copies ... b*copies+copies-1): each
         description is encoded once, then its memory repeated."""
         self.nets = model.nets[:model.ensemble] if model.ensemble else model.nets
-        self.memories = [{k: v.repeat_interleave(copies, 0) for k, v in net.encode(batch).items()} for net in self.nets]
+        stack = model.cfg.encoder == "flat" and model.stack_members
+        memories = StackedEncoder(self.nets).encode(batch) if stack else [net.encode(batch) for net in self.nets]
+        self.memories = [{k: v.repeat_interleave(copies, 0) for k, v in m.items()} for m in memories]
         h0 = torch.stack([m["h0"] for m in self.memories])  # (E, B, h)
         E, B, h = h0.shape
         self.states = h0.new_zeros(E, B, MAX_STEPS + 1, h)
@@ -142,7 +144,7 @@ class DecoderState:
             self.cov = torch.stack([net.initial_coverage(m) for net, m in zip(self.nets, self.memories)])
         self.t = 0
         self.stacked = None
-        if model.cfg.encoder == "flat" and model.stack_members:
+        if stack:
             self.stacked = StackedDecoder(self.nets)
             self.words = torch.stack([m["words"] for m in self.memories])
 

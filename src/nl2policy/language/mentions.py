@@ -10,7 +10,7 @@ from the writer's own tree in 1 of 197 taxi and 3 of 195 highway descriptions (t
 while a tree's action they do not find is common (phrasings they do not know), so only the first
 direction is used as evidence.
 
-The question patterns (taxi only, so far) serve the same check for the questions: a text that
+The question patterns serve the same check for the questions: a text that
 asks "if it is already in the city" and a tree that never asks at_city are at odds. A question is
 only seen where a condition asks it ("if/whether/when/unless/once ... in the city", "in the
 city?", "not in the city", a code-style `inCity`), because descriptions also name places,
@@ -23,6 +23,14 @@ board?", "city road heavy -> village", "long wait: city"), what the taxi checks 
 traffic on the city road", "how long the wait is") and code (`if rider:`, `loc == airport`,
 `villageWaitLong`). With them the patterns find 96% of the questions the trees ask, and a question
 they find is still missing from the writer's tree in the same 4 of 200.
+
+The highway patterns, written the same way, read a condition on the car ahead or behind ("if
+there is a car close in front", "tailgated"), on a side lane ("if the left lane is free", "go right
+if that's free"), on the outer lanes ("if it is in the rightmost lane") and on speed ("if it is
+already driving fast"), and leave reasons alone ("rewarded for going fast", "or because it is
+already in the rightmost lane"). On the corpus, a question they find is missing from the writer's
+tree in none of the 200 highway descriptions, and they find 69% of the questions the trees ask by
+the conditions, 96% with the extended forms (tests check these).
 """
 
 from __future__ import annotations
@@ -119,6 +127,9 @@ _SUBJECT = (r"(?:it|it's|its|it is|the taxi|the taxi's|the taxi is|the car|you|y
 _BE = r"(?:is|are|am|'s|already|currently|still|now|not|isn't|aren't|is not|are not|in fact|actually|sitting|parked|located|right)"
 
 
+_NEAR_CUE = r"\b(?:if|whether|when|whenever|unless|once|while)\b[^.;:\n]{0,40}?"  # a cue, then the same clause
+
+
 def _at(place: str) -> re.Pattern:
     """Where a condition asks whether the taxi is at `place`."""
     return re.compile(
@@ -146,6 +157,19 @@ QUESTION_PATTERNS: dict[str, dict[str, re.Pattern]] = {
             r"(?:is|'s|will be|is going to be|would be|looks)\s+(?:long|short)\b"
             rf"|\b{_CUE}\b[^.;]{{0,40}}\blong\s+wait\b|\blong_?wait\b", re.I),
     },
+    # highway: what a condition (a cue word at most 40 characters before, in the same clause) says
+    # about the car ahead or behind, a side lane's being free, the outer lanes, the car's speed
+    "highway": {
+        "car_ahead_close": re.compile(rf"{_NEAR_CUE}\b(?:ahead|in front|front)\b", re.I),
+        "car_behind_close": re.compile(
+            rf"{_NEAR_CUE}\b(?:(?:close|right|someone|somebody|anyone|anybody|nobody|no one|something|nothing|car|one)"
+            r"\s+(?:is\s+)?(?:close\s+)?behind|tailgat(?:er|ers|ed|ing)|on (?:my|your|its|our|ur|the) tail)\b", re.I),
+        "left_lane_free": re.compile(rf"{_NEAR_CUE}\bleft\b[^.;:\n]{{0,15}}\b(?:free|clear|open|empty|available)\b", re.I),
+        "right_lane_free": re.compile(rf"{_NEAR_CUE}\bright\b[^.;:\n]{{0,15}}\b(?:free|clear|open|empty|available)\b", re.I),
+        "in_left_lane": re.compile(rf"{_NEAR_CUE}\b(?:leftmost|left-most|far left)\b", re.I),
+        "in_right_lane": re.compile(rf"{_NEAR_CUE}\b(?:rightmost|right-most|far right)\b", re.I),
+        "going_fast": re.compile(rf"{_NEAR_CUE}\b(?:fast|slow(?!\s+down))\b", re.I),  # "slow down" is the action
+    },
 }
 
 
@@ -165,6 +189,27 @@ def _at_more(place: str) -> re.Pattern:
         rf"|\b(?:other than|away from|outside(?: of)?)\s+the\s+{place}\b"
         rf"|\b(?:here|loc|location|spot|pos|position)\s*(?:==|is)\s*{place}\b"
         rf"|(?-i:\b[a-z]+(?:In|At){place.capitalize()}\b)", re.I)
+
+
+def _free_side(side: str, other: str) -> re.Pattern:
+    """Whether the lane on `side` is free, without a cue word before it: "left lane free ->",
+    "right is clear", "go right if that's free", "the lane to my left is free", `leftLaneEmpty`."""
+    return re.compile(
+        rf"\b{side}\b(?:(?!\b{other}\b)[^.;\n]){{0,30}}?\b(?:if|when|whenever)\s+(?:it|that|that lane|that one|the lane|"
+        r"its|it's|thats|that's|it is|that is)\s*(?:is\s+)?(?:free|clear|open|empty)\b"
+        rf"|\blane\s+(?:to|on)\s+(?:the|my|your|its|our|ur)\s+{side}(?:\s+side)?\s+(?:is\s+|'s\s+)?(?:free|clear|open|empty)\b"
+        rf"|\b{side}(?:\s+lane)?(?:'s|\s+is)?\s+(?:free|clear|open|empty)\b"
+        rf"|(?-i:\b{side}(?:Lane)?(?:Free|Empty|Clear|Open)\b)", re.I)
+
+
+def _outer_lane(side: str) -> re.Pattern:
+    """Whether the car is in the outermost lane on `side`: "in the rightmost lane", "on the far
+    right", `inRightmost`, "rightmost {", `lane == rightmost`; not "already in the rightmost lane",
+    which the descriptions write as a reason the lane beside is not free."""
+    most = f"{side}most"
+    return re.compile(
+        rf"(?<!already )(?<!being )\b(?:in|on)\s+(?:the\s+)?(?:{most}|{side}-most|far {side})\b"
+        rf"|(?-i:\b(?:in)?{most.capitalize()}\b)|\b{most}\s*(?:\?|:|\{{|{_ARROW})|==\s*{most}", re.I)
 
 
 # the "extended" forms, each added to a question's condition patterns above: the condition without
@@ -195,6 +240,25 @@ EXTENDED_QUESTION_PATTERNS: dict[str, dict[str, re.Pattern]] = {
             r"(?:at|in)\s+(?:the\s+)?village\b|\bwaiting\s+time\b|\bhow\s+long\s+(?:the\s+)?wait"
             r"|\bwait\s+(?:is|gets|be|isn't|is not)\s+(?:super\s+|too\s+|very\s+|not\s+)?(?:long|short)\b"
             rf"|(?<!a )\b(?:long|short)\s+wait(?:ing)?(?:\s+there)?\s*(?:[,:]|{_ARROW}|\b(?:expected|means|go|drive))", re.I),
+    },
+    # highway: the same without a cue word ("car close ahead: ...", "tailgated, move right",
+    # "left lane free -> pass", "go right if that's free", "already fast"), and code (`bumperAhead`,
+    # `rightFree`, `if (inRightmost)`, `lane == rightmost`); a reason is not a condition
+    # ("rewarded for going fast", "or because it is already in the rightmost lane")
+    "highway": {
+        "car_ahead_close": re.compile(
+            r"\b(?:close|near|right)\s+(?:in\s+front|ahead)\b|\bahead\s+close\b|(?-i:\b[a-z]\w*(?:Ahead|Front)\w*)"
+            rf"|\b(?:car|someone|somebody|nobody|no one|anyone|something)\s+(?:close\s+)?(?:ahead|in front)\s*(?:\?|:|{_ARROW})",
+            re.I),
+        "car_behind_close": re.compile(
+            r"\bclose\s+behind\b|\btailgat(?:er|ers|ed|ing)\b|\bon\s+(?:my|your|its|our|ur)\s+tail\b|(?-i:\b[a-z]\w*Behind\w*)",
+            re.I),
+        "left_lane_free": _free_side("left", "right"), "right_lane_free": _free_side("right", "left"),
+        "in_left_lane": _outer_lane("left"), "in_right_lane": _outer_lane("right"),
+        "going_fast": re.compile(
+            r"(?<!for )(?<!and )\b(?:already|not|driving|going|is|am|i'm|it's|ur|you're|we're)\s+"
+            r"(?:already\s+|driving\s+|going\s+)?fast\b(?!\s+(?:is|earns|pays|gets)\b)"
+            rf"|\bfast\s*(?:\?|:|{_ARROW}|already)|\bif\s+fast\b|\bspeed\s+is\s+(?:fast|slow)\b", re.I),
     },
 }
 

@@ -18,7 +18,7 @@ Only plain statements are read: within one sentence or clause (split at . ; ! ? 
 breaks), answers before exactly one action, nothing conditional after it ("..., unless",
 "if not"), no "whether" before it (a question being asked, not answered) and no answer given both
 ways. Like the mention patterns, the answer and action patterns were written reading the corpus
-(taxi only so far), so cross-validation does not measure them on unread text.
+(the answers for taxi only), so cross-validation does not measure them on unread text.
 
 The extended forms (`forms="extended"`) read two more ways of stating a rule:
 - a quantified rule, "When it's clear, I drive to the city, no matter what", "Not in the city?
@@ -35,7 +35,9 @@ against the plain forms' 269, 27 of them quantified, and still fault no writer's
 checks this), once waiting at a place counts as going there ("short wait means village, always").
 
 The text may also say which question comes first ("First check whether the village has a long
-wait", "the passenger comes first"): `first_question`, which the decoder's root cost reads.
+wait", "the passenger comes first"): `first_question`, which the decoder's root cost reads. It is
+read in highway too ("First, check whether there is a car close in front"), by highway's question
+patterns (mentions.py) and action patterns; stated rules stay taxi only (no answer patterns).
 """
 
 from __future__ import annotations
@@ -95,10 +97,18 @@ def _goes(place: str) -> str:
             rf"|(?:->|\u2192|:)\s*(?:the\s+)?{place}\b|\bmeans\s+(?:the\s+)?{place}\b")
 
 
+_MOVE = (r"\b(?:move|moves|moving|change|changes|changing|switch|switches|merge|merges|go|goes|shift|shifts|pull|pulls|"
+         r"get|gets|steer|steers)\s+(?:over\s+|one\s+lane\s+|back\s+)?(?:(?:in)?to\s+)?(?:the\s+)?")
 _ACTIONS: dict[str, list[tuple[str, str]]] = {"taxi": [
     ("go_airport", _goes("airport")), ("go_village", _goes("village")), ("go_city", _goes("city")),
     ("wait", r"(?<!long )(?<!short )(?<!the )(?<!a )\b(?:wait|waits|stay|stays|stay put|wait it out)\b"
              r"(?!\s+(?:is|for a passenger at the village|there is|gets|be|at the village is))"),
+], "highway": [  # read by first_question only (highway has no answer patterns, so no stated rules)
+    ("lane_left", _MOVE + r"left\b"), ("lane_right", _MOVE + r"right\b"),
+    ("faster", r"\b(?:speed(?:s|ing)?\s+up|accelerat\w*|go(?:es)?\s+faster)\b"),
+    ("slower", r"\b(?:slow(?:s|ing)?\s+down|brak(?:e|es|ing)|decelerat\w*|go(?:es)?\s+slower)\b"),
+    ("idle", r"\b(?:keep|keeps|keeping|hold|holds|stay|stays)\s+(?:in\s+)?(?:its|my|the|your|our|ur|same|current)?\s*"
+             r"(?:lane|speed)\b|\bcruise\b"),
 ]}
 _CLAUSE = re.compile(r"[.;!?\n]+")
 _CLAUSE_KEEP = re.compile(r"([.;!?\n]+)")  # the same split, keeping what split it
@@ -117,7 +127,7 @@ _ASKED_BEFORE = re.compile(r"\b(?:whether|unless|otherwise|else|except)\b", re.I
 
 
 def _answers(domain: str, clause: str) -> list[tuple[int, int, str, bool]]:
-    found = [(m.start(), m.end(), q, a) for q, a, p in _ANSWERS[domain] for m in re.finditer(p, clause, re.I)]
+    found = [(m.start(), m.end(), q, a) for q, a, p in _ANSWERS.get(domain, []) for m in re.finditer(p, clause, re.I)]
     noes = [(s, e, q) for s, e, q, a in found if not a]
     return [(s, e, q, a) for s, e, q, a in found
             if not a or not any(q == q2 and s < e2 and s2 < e for s2, e2, q2 in noes)]
@@ -239,9 +249,13 @@ def _asked(domain: str, text: str, topics: bool = False) -> list[tuple[int, str]
     for table in (QUESTION_PATTERNS, EXTENDED_QUESTION_PATTERNS):
         found += [(m.start(), q) for q, p in table.get(domain, {}).items() for m in [p.search(text)] if m]
     if topics:
-        found += [(m.start(), q) for q, p in _TOPICS[domain] for m in [re.search(p, text, re.I)] if m]
+        found += [(m.start(), q) for q, p in _TOPICS.get(domain, []) for m in [re.search(p, text, re.I)] if m]
     action = min((s for s, _, _ in _actions(domain, text)), default=len(text))
     return [(s, q) for s, q in found if s < action]
+
+
+_FIRST_BEFORE_ANY_QUESTION = {"highway"}
+"""Domains where a "first" names the root only before the text has asked any question."""
 
 
 @lru_cache(maxsize=TEXTS_CACHED)
@@ -250,11 +264,18 @@ def first_question(domain: str, text: str) -> Optional[str]:
     a long wait", "So the taxi's first question is whether it's in the city", "Everything starts
     with the traffic on the city road", "the passenger comes first" (None for a domain without
     patterns). A "first" inside a branch is not the root's ("Empty taxi: first see if it is at the
-    airport"), so the sentence must name no question before its "first". No writer's tree asks
-    another question first (0 of 200 taxi descriptions; a test checks this)."""
-    if domain not in _ANSWERS:
+    airport"), so the sentence must name no question before its "first". A highway description
+    often gives the easy case before the rest ("If the road in front is clear, speed up. When there
+    is a car, ... First try the left"), so there a "first" after any question the text has already
+    asked is inside a branch too. No writer's tree asks another question first (0 of 200 taxi and 0
+    of 200 highway descriptions; a test checks this)."""
+    if domain not in _ACTIONS:
         return None
+    start = 0
     for sentence in _SENTENCE.split(text):
+        if domain in _FIRST_BEFORE_ANY_QUESTION and _asked(domain, text[:start]):
+            return None
+        start += len(sentence) + 1  # the one character split on
         comes_first = _COMES_FIRST.search(sentence)
         if comes_first and (before := _asked(domain, sentence[:comes_first.start()], topics=True)):
             return max(before)[1]

@@ -190,6 +190,12 @@ def tree_probability(node_probs: dict[int, float]) -> float:
     return math.prod(node_probs.values())
 
 
+def _asks(domain: str, question: str) -> str:
+    """A question's words for a warning: the dictionary's, without its note ("Is the lane to my
+    left free? (no: there is a car there, or no lane)" -> "is the lane to my left free")."""
+    return get_domain(domain).vocab.questions[question].split("?")[0].lower()
+
+
 def translate(domain: str, text: str, name: str = DEFAULT_MODEL) -> Translation:
     """Translate one description into a valid tree of `domain`, with confidence and warnings."""
     get_domain(domain)
@@ -206,14 +212,13 @@ def translate(domain: str, text: str, name: str = DEFAULT_MODEL) -> Translation:
         said = get_domain(domain).vocab.actions[action].lower()
         warnings.append(f"the description says to {said} ({action}), but the tree never does: check where it should")
     for question in sorted(unasked_questions(domain, text, tree, forms="extended")):
-        asked = get_domain(domain).vocab.questions[question].rstrip("?").lower()
-        warnings.append(f"the description asks \"{asked}?\" ({question}), but the tree never does: check where it should")
+        warnings.append(f"the description asks \"{_asks(domain, question)}?\" ({question}), but the tree never does: "
+                        "check where it should")
     for rule in broken_rules(domain, text, tree, forms="extended"):  # like the questions: all forms, whatever the model's check reads
         does = "does not always do that there" if rule.every else "never does that there"
         warnings.append(f"the description says \"{rule.text}\", but the tree {does}: check that branch")
     first = first_question(domain, text)
     if first is not None and getattr(tree, "question", None) != first:
-        said = get_domain(domain).vocab.questions[first].rstrip("?").lower()
-        warnings.append(f"the description says to ask first \"{said}?\" ({first}), but the tree asks something else "
-                        "first: check its top")
+        warnings.append(f"the description says to ask first \"{_asks(domain, first)}?\" ({first}), but the tree asks "
+                        "something else first: check its top")
     return Translation(tree, confidence, warnings, {k: v * factor for k, v in node_probs.items()})

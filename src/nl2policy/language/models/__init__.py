@@ -25,8 +25,8 @@ trees, `synthetic.mutate`) and -synth-tune1-x4-mentions (MiniLM's last layer tra
 `ModelConfig.minilm_tune`, `network.Translator._minilm_states`) and -synth-cross-x4-mentions (also
 trained on the other domain's descriptions by the same writers, `dataset.borrowed_pairs`);
 seq2tree-minilm-synth-x4-mentions-questions = the default's networks, whose final choice among the
-beam's trees also pays 1 nat per question the text asks that the tree never asks (taxi only;
-mentions.named_questions);
+beam's trees also pays 1 nat per question the text asks that the tree never asks
+(mentions.named_questions; taxi only until the highway patterns of the third session of 2026-12-02);
 seq2tree-minilm-synth-x4-mentions-questions-ext = the same networks, the question check finding
 questions by their extended forms too (list headers, code) and paying 2 nats for each;
 seq2tree-minilm-synth-x4-mentions-questions-ext-rules = the model above, whose final
