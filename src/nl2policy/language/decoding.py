@@ -44,11 +44,8 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
     names = model.tree_tokens
     index = {t: i for i, t in enumerate(names)}
     is_action = torch.tensor([t in vocab.actions for t in names])
-    leaf_cost = model.cfg.leaf_cost if model.leaf_cost is None else model.leaf_cost
-    mention_cost = model.cfg.mention_cost if model.mention_cost is None else model.mention_cost
-    question_cost = model.cfg.question_cost if model.question_cost is None else model.question_cost
-    rule_cost = model.cfg.rule_cost if model.rule_cost is None else model.rule_cost
-    root_cost = model.cfg.root_cost if model.root_cost is None else model.root_cost
+    leaf_cost, mention_cost, question_cost, rule_cost, root_cost = (
+        model.decoding(c) for c in ("leaf_cost", "mention_cost", "question_cost", "rule_cost", "root_cost"))
     B, K = len(texts), max(1, model.beam or model.cfg.beam)
     state = DecoderState(model, batch, copies=K)
     prefixes: list[list[str]] = [[] for _ in range(B * K)]

@@ -76,9 +76,10 @@ _SPEED_BACK = {v: k for k, v in _SPEED_FORMS.items()}
 _SPEED_BACK.update({"decelerate": "accelerate", "decelerates": "accelerates"})
 _SPEED = re.compile(r"\b(?P<key>" + "|".join(sorted(map(re.escape, list(_SPEED_FORMS) + list(_SPEED_BACK)),
                                                    key=len, reverse=True)) + r")\b", re.I)
-_LANE = re.compile(r"\b(?:move|moves|moving|change|changes|changing|switch|switches|merge|merges|go|goes|shift|shifts|"
-                   r"pull|pulls|get|gets|steer|steers)\s+(?:over\s+|one\s+lane\s+|back\s+)?(?:(?:in)?to\s+)?(?:the\s+)?"
-                   r"(?P<key>left|right)\b", re.I)
+LANE_MOVE = (r"\b(?:move|moves|moving|change|changes|changing|switch|switches|merge|merges|go|goes|shift|shifts|"
+             r"pull|pulls|get|gets|steer|steers)\s+(?:over\s+|one\s+lane\s+|back\s+)?(?:(?:in)?to\s+)?(?:the\s+)?")
+"""A lane change up to its side ("move over to the", "switch into the"): the side follows."""
+_LANE = re.compile(LANE_MOVE + r"(?P<key>left|right)\b", re.I)
 
 GROUPS: dict[str, list[ActionGroup]] = {
     "taxi": [ActionGroup(("go_airport", "go_village", "go_city"), _TAXI,

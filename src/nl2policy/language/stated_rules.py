@@ -48,7 +48,7 @@ from functools import lru_cache
 from typing import Optional, Sequence
 
 from nl2policy.domains import get_domain
-from nl2policy.language.mentions import EXTENDED_QUESTION_PATTERNS, QUESTION_PATTERNS, TEXTS_CACHED
+from nl2policy.language.mentions import EXTENDED_QUESTION_PATTERNS, LANE_MOVE, QUESTION_PATTERNS, TEXTS_CACHED
 from nl2policy.trees import Tree
 
 
@@ -97,14 +97,12 @@ def _goes(place: str) -> str:
             rf"|(?:->|\u2192|:)\s*(?:the\s+)?{place}\b|\bmeans\s+(?:the\s+)?{place}\b")
 
 
-_MOVE = (r"\b(?:move|moves|moving|change|changes|changing|switch|switches|merge|merges|go|goes|shift|shifts|pull|pulls|"
-         r"get|gets|steer|steers)\s+(?:over\s+|one\s+lane\s+|back\s+)?(?:(?:in)?to\s+)?(?:the\s+)?")
 _ACTIONS: dict[str, list[tuple[str, str]]] = {"taxi": [
     ("go_airport", _goes("airport")), ("go_village", _goes("village")), ("go_city", _goes("city")),
     ("wait", r"(?<!long )(?<!short )(?<!the )(?<!a )\b(?:wait|waits|stay|stays|stay put|wait it out)\b"
              r"(?!\s+(?:is|for a passenger at the village|there is|gets|be|at the village is))"),
 ], "highway": [  # read by first_question only (highway has no answer patterns, so no stated rules)
-    ("lane_left", _MOVE + r"left\b"), ("lane_right", _MOVE + r"right\b"),
+    ("lane_left", LANE_MOVE + r"left\b"), ("lane_right", LANE_MOVE + r"right\b"),
     ("faster", r"\b(?:speed(?:s|ing)?\s+up|accelerat\w*|go(?:es)?\s+faster)\b"),
     ("slower", r"\b(?:slow(?:s|ing)?\s+down|brak(?:e|es|ing)|decelerat\w*|go(?:es)?\s+slower)\b"),
     ("idle", r"\b(?:keep|keeps|keeping|hold|holds|stay|stays)\s+(?:in\s+)?(?:its|my|the|your|our|ur|same|current)?\s*"

@@ -59,6 +59,11 @@ class TrainedTranslator:
     ensemble: Optional[int] = None  # decode with the first n networks only; None: all of them
     stack_members: bool = True  # flat encoders: decode all members as one batch (False: one by one, same result)
 
+    def decoding(self, setting: str) -> float:
+        """A decoding cost (`leaf_cost`, `mention_cost`, ...): this translator's override, else its config's."""
+        own = getattr(self, setting)
+        return getattr(self.cfg, setting) if own is None else own
+
     @property
     def net(self) -> Translator:
         """The first network (the only one unless the config asks for an ensemble)."""

@@ -142,8 +142,7 @@ class Translator(nn.Module):
         x = self._inputs(b)
         mask = b.words != 0
         if self.cfg.encoder == "flat":
-            states = self.drop(self._words(x, b.lengths, b.sent_ids))
-            return {"words": states, "mask": mask, "h0": torch.tanh(self.init(_masked_mean(states, mask)))}
+            return self.flat_memory(self.drop(self._words(x, b.lengths, b.sent_ids)), mask)
         B, S, W = b.sent_index.shape
         grid_index = b.sent_index.view(B, S * W, 1)
         word_mask = torch.arange(W)[None, None] < b.sent_lengths[..., None]  # (B, S, W)
@@ -164,6 +163,10 @@ class Translator(nn.Module):
         return {"words": states, "mask": mask, "grid_index": b.sent_index, "word_mask": word_mask,
                 "sents": sent_states, "sent_mask": sent_mask,
                 "h0": torch.tanh(self.init(_masked_mean(sent_states, sent_mask)))}
+
+    def flat_memory(self, states: torch.Tensor, mask: torch.Tensor) -> dict:
+        """The flat encoder's memory: its word states and mask, and the decoder's start state."""
+        return {"words": states, "mask": mask, "h0": torch.tanh(self.init(_masked_mean(states, mask)))}
 
     def attend(self, memory: dict, h: torch.Tensor, cov: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, Optional[torch.Tensor]]:
         """The attention context for decoder state h, and the word attention it used (flat
@@ -277,8 +280,7 @@ class StackedEncoder:
         x = torch.stack([net._inputs(b) for net in self.nets])  # (E, B, N, in)
         mask = b.words != 0
         states = self.bigru(x, b.lengths)
-        return [{"words": states[e], "mask": mask, "h0": torch.tanh(net.init(_masked_mean(states[e], mask)))}
-                for e, net in enumerate(self.nets)]
+        return [net.flat_memory(states[e], mask) for e, net in enumerate(self.nets)]
 
     def bigru(self, x: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
         """x (E, B, N, in) -> (E, B, N, 2h): each member's BiGRU over each text's first
