@@ -18,6 +18,10 @@ _ENTRY_POINTS = {
 for _env_id, _entry in _ENTRY_POINTS.items():
     if _env_id not in gym.registry:
         gym.register(_env_id, entry_point=_entry)
+# highway-env's scene, vectorized: one episode with gym.make, N with gym.make_vec.
+if "nl2policy/HighwayTwin-v0" not in gym.registry:
+    gym.register("nl2policy/HighwayTwin-v0", entry_point="nl2policy.domains.highway_vec:HighwayTwinEnv",
+                 vector_entry_point="nl2policy.domains.highway_vec:HighwayTwinVectorEnv")
 
 
 @lru_cache(maxsize=None)

@@ -19,7 +19,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from nl2policy.data import corpus_dir
-from nl2policy.trees import Tree, Vocabulary
+from nl2policy.trees import Leaf, Tree, Vocabulary
 
 SPEC_DIR = Path(__file__).resolve().parent
 
@@ -60,6 +60,17 @@ class Domain:
     def tree_action(self, tree: Tree, x: np.ndarray) -> int:
         """The action index a lexical tree picks for feature vector `x`."""
         return self.action_index(tree.act(self.answers(x)))
+
+    def tree_actions(self, tree: Tree, x: np.ndarray) -> np.ndarray:
+        """The action index a lexical tree picks for each row of a batch of feature vectors."""
+        answers = self.answer_matrix(x)
+
+        def act(node: Tree) -> np.ndarray:
+            if isinstance(node, Leaf):
+                return np.full(len(answers), self.action_index(node.action), dtype=np.int64)
+            return np.where(answers[:, self.questions.index(node.question)], act(node.yes), act(node.no))
+
+        return act(tree)
 
     def is_possible(self, answers: Mapping[str, bool]) -> bool:
         return not any(all(answers[q] == v for q, v in rule.items()) for rule in self.impossible)

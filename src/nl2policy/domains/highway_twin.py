@@ -1,0 +1,571 @@
+"""A vectorized twin of the highway-env scene our highway domain uses, for training at real budgets.
+
+highway-env steps one episode at a time through per-vehicle Python objects (about 27 env steps
+a second here, ``results/benchmarks/env_steps.txt``). This module simulates the same scene,
+``highway-fast-v0`` with our config, for N episodes at once: every quantity is an array of
+shape (envs, vehicles), vehicle 0 is the ego car, and one step has no Python loop over
+vehicles or episodes.
+
+What is reproduced, rule by rule from highway-env 1.12 (constants are read from its classes,
+not copied, so a changed constant there changes the twin too):
+
+* the road: a straight road of ``lanes_count`` lanes, ``StraightLane.DEFAULT_WIDTH`` wide,
+  speed limit 30 m/s; a vehicle's lane is the closest lane centre;
+* initial placement (``Vehicle.create_random``): the ego car in a uniform lane at 25 m/s,
+  then each other car in a uniform lane at U(0.7, 0.8) x the speed limit, each placed
+  ``spacing * (12 + speed) * exp(-5/40 * lanes) * U(0.9, 1.1)`` metres ahead of the car
+  before it; each other car draws its IDM exponent from ``IDMVehicle.DELTA_RANGE`` and starts
+  its lane-change timer at ``(x + y) * pi mod LANE_CHANGE_DELAY``;
+* the other cars' behaviour (``IDMVehicle.act``): IDM acceleration on the car ahead in their
+  lane (and in the target lane while changing), clipped to ``ACC_MAX``; MOBIL lane changes
+  (politeness 0) every ``LANE_CHANGE_DELAY``; aborting a lane change when another car merging
+  into the same lane is within the desired gap ahead; the cascaded lateral controller;
+* the ego car (``MDPVehicle``): meta-actions LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER over
+  the target speeds (20, 25, 30) m/s, applied once a decision, then the speed and steering
+  controllers every frame;
+* kinematics (``Vehicle.step``): the bicycle model, speed limited to +-40 m/s, 5 Hz frames,
+  one decision a second, 30 s episodes;
+* collisions (``RoadObject.handle_collisions``): only the ego car checks them (the fast
+  variant switches them off for the others): the spherical pre-check, then the separating-axis
+  test on the rotated rectangles with the one-frame sweep, "will intersect" pushing both cars
+  apart and crashing them on the next frame, "intersecting" crashing them at once; a crashed
+  car brakes to a stop with its wheels straight;
+* the reward (``HighwayEnv._reward``, normalized, times on-road) and termination on a crash;
+* our six features, computed from the 4 cars nearest along the road within 200 m, as the
+  Kinematics observation with ``vehicles_count=5`` would show them.
+
+Neighbour searches sort the cars by position once a frame and scan each lane's order
+(``_lane_neighbours``); the collision test is ego against each other car, O(vehicles).
+
+Known differences, each with its reason:
+
+* Random numbers: the same distributions, drawn in batches from one NumPy Generator, so a
+  seed gives other traffic than highway-env's seed does (and a twin episode depends on how
+  many episodes run beside it).
+* Order within a frame: highway-env lets the cars act one after another, so a car's MOBIL
+  choice can see the target lanes that cars before it in the list chose in the same frame.
+  Here all cars decide on the state at the start of the frame.
+* The abort test of a lane change looks only at the nearest car ahead that merges into the
+  same lane, not at every such car.
+* Exact ties in position (probability zero) may order differently.
+
+Fidelity against highway-env is measured by ``nl2policy highway-fidelity`` and kept by a test.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Optional
+
+import numpy as np
+from highway_env.envs.highway_env import HighwayEnvFast
+from highway_env.road.lane import AbstractLane, StraightLane
+from highway_env.vehicle.behavior import IDMVehicle
+from highway_env.vehicle.controller import ControlledVehicle, MDPVehicle
+from highway_env.vehicle.kinematics import Vehicle
+
+from nl2policy.domains.highway import BASE_CONFIG, RANGE, SPEED_SCALE
+
+# highway-env's DiscreteMetaAction labels by index.
+LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
+OBSERVED = 4  # other cars in the Kinematics observation (vehicles_count 5 with the ego)
+
+
+@dataclass(frozen=True)
+class TwinConfig:
+    """The scene's numbers, read from highway-env's config and classes (see ``from_highway_env``)."""
+
+    lanes: int
+    vehicles: int  # other cars
+    duration: int  # decisions (seconds) per episode
+    frames: int  # simulation frames per decision
+    dt: float  # seconds per frame
+    ego_spacing: float
+    density: float
+    speed_limit: float
+    collision_reward: float
+    right_lane_reward: float
+    high_speed_reward: float
+    reward_speed_range: tuple[float, float]
+    perception: float  # metres: farther cars are not observed
+
+    @classmethod
+    def from_highway_env(cls, overrides: Optional[dict[str, Any]] = None) -> "TwinConfig":
+        """The config ``gym.make("highway-fast-v0", config=BASE_CONFIG | overrides)`` runs with."""
+        cfg = HighwayEnvFast.default_config()
+        cfg.update({**BASE_CONFIG, **(overrides or {})})
+        if cfg["simulation_frequency"] % cfg["policy_frequency"]:
+            raise ValueError("simulation_frequency must be a multiple of policy_frequency")
+        if not cfg["normalize_reward"] or cfg["lane_change_reward"] or cfg["offroad_terminal"]:
+            raise ValueError("the twin implements the normalized reward without lane-change reward or "
+                             "off-road termination")
+        if cfg["controlled_vehicles"] != 1 or cfg["initial_lane_id"] is not None:
+            raise ValueError("the twin implements one controlled car in a random lane")
+        return cls(
+            lanes=int(cfg["lanes_count"]), vehicles=int(cfg["vehicles_count"]),
+            duration=int(cfg["duration"] * cfg["policy_frequency"]),
+            frames=int(cfg["simulation_frequency"] // cfg["policy_frequency"]),
+            dt=1 / cfg["simulation_frequency"],
+            ego_spacing=float(cfg["ego_spacing"]), density=float(cfg["vehicles_density"]),
+            speed_limit=30.0,  # HighwayEnv._create_road: straight_road_network(..., speed_limit=30)
+            collision_reward=float(cfg["collision_reward"]), right_lane_reward=float(cfg["right_lane_reward"]),
+            high_speed_reward=float(cfg["high_speed_reward"]),
+            reward_speed_range=tuple(map(float, cfg["reward_speed_range"])),
+            perception=float(HighwayEnvFast.PERCEPTION_DISTANCE),
+        )
+
+
+# highway-env's constants, by the class that owns them.
+LENGTH, WIDTH = Vehicle.LENGTH, Vehicle.WIDTH
+DIAGONAL = float(np.sqrt(LENGTH**2 + WIDTH**2))
+MAX_SPEED, MIN_SPEED = Vehicle.MAX_SPEED, Vehicle.MIN_SPEED
+LANE_WIDTH = StraightLane.DEFAULT_WIDTH
+ROAD_LENGTH = 10000.0  # RoadNetwork.straight_road_network's default length
+KP_A, KP_HEADING, KP_LATERAL = ControlledVehicle.KP_A, ControlledVehicle.KP_HEADING, ControlledVehicle.KP_LATERAL
+MAX_STEERING = ControlledVehicle.MAX_STEERING_ANGLE
+TARGET_SPEEDS = np.asarray(MDPVehicle.DEFAULT_TARGET_SPEEDS, dtype=np.float64)
+EGO_SPEED = 25.0  # HighwayEnv._create_vehicles: Vehicle.create_random(road, speed=25.0, ...)
+IDM = IDMVehicle
+
+
+def _not_zero(x: np.ndarray, eps: float = 1e-2) -> np.ndarray:
+    """highway_env.utils.not_zero, elementwise."""
+    return np.where(np.abs(x) > eps, x, np.where(x >= 0, eps, -eps))
+
+
+def _wrap_to_pi(x: np.ndarray) -> np.ndarray:
+    return ((x + np.pi) % (2 * np.pi)) - np.pi
+
+
+def _separating_axes(a: tuple, b: tuple, dt: float) -> tuple[np.ndarray, ...]:
+    """utils.are_polygons_intersecting for pairs of car rectangles a, b = (x, y, heading, speed),
+    each a 1-D array over pairs: (intersecting, will intersect within dt, translation x, y).
+
+    The axes are each rectangle's four edge normals in the polygon's order, the ego's first: the
+    translation is along the first axis of least |distance|, as there."""
+    ax_, ay_, ah, aspeed = a
+    bx, by, bh, bspeed = b
+    ac, as_, bc, bs = np.cos(ah), np.sin(ah), np.cos(bh), np.sin(bh)
+    sweep_x, sweep_y = (aspeed * ac - bspeed * bc) * dt, (aspeed * as_ - bspeed * bs) * dt
+    centre_dx, centre_dy = ax_ - bx, ay_ - by
+
+    def project(cx, cy, c, s, nx, ny):
+        centre = cx * nx + cy * ny
+        extent = LENGTH / 2 * np.abs(c * nx + s * ny) + WIDTH / 2 * np.abs(-s * nx + c * ny)
+        return centre - extent, centre + extent
+
+    def interval_distance(min_a, max_a, min_b, max_b):
+        return np.where(min_a < min_b, min_b - max_a, min_a - max_b)
+
+    intersecting = np.ones(ax_.shape, dtype=bool)
+    will = np.ones(ax_.shape, dtype=bool)
+    best = np.full(ax_.shape, np.inf)
+    axis_x, axis_y = np.zeros(ax_.shape), np.zeros(ax_.shape)
+    for c, s in ((ac, as_), (bc, bs)):
+        for nx, ny in ((-c, -s), (-s, c), (c, s), (s, -c)):
+            min_a, max_a = project(ax_, ay_, ac, as_, nx, ny)
+            min_b, max_b = project(bx, by, bc, bs, nx, ny)
+            intersecting &= interval_distance(min_a, max_a, min_b, max_b) <= 0
+            sweep = nx * sweep_x + ny * sweep_y
+            min_a, max_a = np.where(sweep < 0, min_a + sweep, min_a), np.where(sweep < 0, max_a, max_a + sweep)
+            distance = interval_distance(min_a, max_a, min_b, max_b)
+            will &= distance <= 0
+            closer = np.abs(distance) < best
+            best = np.where(closer, np.abs(distance), best)
+            sign = np.where(centre_dx * nx + centre_dy * ny > 0, 1.0, -1.0)
+            axis_x, axis_y = np.where(closer, sign * nx, axis_x), np.where(closer, sign * ny, axis_y)
+    return intersecting, will, best * axis_x, best * axis_y
+
+
+class _RoadOrder:
+    """The cars of each episode sorted by position along the road, to find for every car the
+    nearest car ahead or behind that meets a condition with one running min (or max) over the
+    sorted order: O(cars log cars) per episode, where comparing all pairs is O(cars^2)."""
+
+    def __init__(self, x: np.ndarray) -> None:
+        n, v = x.shape
+        self.v = v
+        self.rows = np.arange(n)[:, None]
+        self.order = np.argsort(x, axis=1, kind="stable")  # sorted position -> car
+        self.rank = np.empty_like(self.order)  # car -> sorted position
+        self.rank[self.rows, self.order] = np.arange(v)
+        self.order_padded = np.concatenate([self.order, np.full((n, 1), v)], axis=1)
+        self.positions = np.arange(v)
+        self.none = np.full((n, 1), v)
+
+    def _to_cars(self, position: np.ndarray) -> np.ndarray:
+        """For each car (by sorted position) the car at `position` (v = none), back in car order."""
+        return self.order_padded[self.rows, position][self.rows, self.rank]
+
+    def ahead(self, mask: np.ndarray) -> np.ndarray:
+        """For each car, the nearest car strictly after it in the order with `mask` set."""
+        on = mask[self.rows, self.order]
+        nearest = np.minimum.accumulate(np.where(on, self.positions, self.v)[:, ::-1], axis=1)[:, ::-1]
+        return self._to_cars(np.concatenate([nearest[:, 1:], self.none], axis=1))
+
+    def behind(self, mask: np.ndarray) -> np.ndarray:
+        """For each car, the nearest car strictly before it in the order with `mask` set."""
+        on = mask[self.rows, self.order]
+        nearest = np.maximum.accumulate(np.where(on, self.positions, -1), axis=1)
+        nearest = np.concatenate([np.full_like(self.none, -1), nearest[:, :-1]], axis=1)
+        return self._to_cars(np.where(nearest < 0, self.v, nearest))
+
+
+class _Cars:
+    """What IDM reads of a car, for every car plus a "no car" column (index v), gathered by
+    index arrays with one flat take: built once a frame, not once a query."""
+
+    FIELDS = ("x", "vx", "vy", "speed", "target", "cos", "sin")  # what a front car needs comes first
+    FRONT = 3
+
+    def __init__(self, twin: "HighwayTwin") -> None:
+        n, v = twin.x.shape
+        self.v = v
+        self.base = np.arange(n)[:, None] * (v + 1)
+        cos, sin = np.cos(twin.heading), np.sin(twin.heading)
+        target = np.abs(_not_zero(np.clip(twin.target_speed, 0, twin.config.speed_limit)))
+        table = np.zeros((len(self.FIELDS), n, v + 1))
+        for k, values in enumerate((twin.x, twin.speed * cos, twin.speed * sin, twin.speed, target, cos, sin)):
+            table[k, :, :v] = values
+        table[4, :, v] = 1.0  # "no car" has a harmless target speed; its results are masked out
+        self.flat = table.reshape(len(self.FIELDS), -1)
+        self.own = table[:, :, :v]  # each car itself, without a copy
+        self.free_own = IDM.COMFORT_ACC_MAX * (1 - np.power(np.maximum(twin.speed, 0) / target, twin.delta))
+
+    def take(self, index: np.ndarray, fields: int = len(FIELDS)) -> np.ndarray:
+        """(fields, n, v): the first `fields` fields of car index[n, i]."""
+        return self.flat[:fields, self.base + index]
+
+
+class HighwayTwin:
+    """N highway episodes stepped together. State arrays have shape (envs, 1 + other cars).
+
+    ``reset(mask)`` draws new scenes for the episodes in `mask`; ``step(actions)`` takes one
+    highway-env meta-action index per episode and returns rewards, crashes and time-outs.
+    ``features()`` gives our six features per episode. Finished episodes are not reset here:
+    the vector env adapters decide when.
+    """
+
+    def __init__(self, num_envs: int, config: Optional[TwinConfig] = None, seed: Optional[int] = None) -> None:
+        if num_envs < 1:
+            raise ValueError("num_envs must be at least 1")
+        self.config = config or TwinConfig.from_highway_env()
+        self.num_envs = n = num_envs
+        self.v = v = 1 + self.config.vehicles
+        self.rng = np.random.default_rng(seed)
+        self.x, self.y, self.heading, self.speed = (np.zeros((n, v)) for _ in range(4))
+        self.target_speed, self.delta, self.timer = (np.zeros((n, v)) for _ in range(3))
+        self.impact = np.zeros((n, v, 2))
+        self.impact_pending = np.zeros((n, v), dtype=bool)
+        self.crashed = np.zeros((n, v), dtype=bool)
+        self.lane = np.zeros((n, v), dtype=np.int64)
+        self.target_lane = np.zeros((n, v), dtype=np.int64)
+        self.time = np.zeros(n, dtype=np.int64)
+        self.reset(np.ones(n, dtype=bool))
+
+    def seed(self, seed: Optional[int]) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    # ----- scenes -------------------------------------------------------------------------
+    def reset(self, mask: np.ndarray) -> None:
+        """New scenes for the episodes in `mask` (Vehicle.create_random, car after car)."""
+        idx = np.flatnonzero(mask)
+        k, c, others = len(idx), self.config, self.config.vehicles
+        if k == 0:
+            return
+        rng = self.rng
+        lane_factor = np.exp(-5 / 40 * c.lanes)
+        lanes = rng.integers(0, c.lanes, size=(k, self.v))
+        speeds = np.concatenate([np.full((k, 1), EGO_SPEED),
+                                 rng.uniform(0.7 * c.speed_limit, 0.8 * c.speed_limit, size=(k, others))], axis=1)
+        spacing = np.concatenate([np.full((k, 1), c.ego_spacing), np.full((k, others), 1 / c.density)], axis=1)
+        offsets = spacing * (12 + speeds) * lane_factor
+        gaps = offsets * rng.uniform(0.9, 1.1, size=(k, self.v))
+        gaps[:, 0] += 3 * offsets[:, 0]  # the first car starts 3 offsets from the origin
+        x = np.cumsum(gaps, axis=1)
+        y = lanes * LANE_WIDTH
+        self.x[idx], self.y[idx], self.speed[idx] = x, y, speeds
+        self.heading[idx] = 0.0
+        self.lane[idx] = lanes
+        self.target_lane[idx] = lanes
+        self.target_speed[idx] = speeds  # ControlledVehicle: target speed = initial speed (25 for the ego)
+        self.delta[idx] = rng.uniform(*IDM.DELTA_RANGE, size=(k, self.v))
+        self.delta[idx, 0] = IDM.DELTA  # unused for the ego, which is not an IDM car
+        self.timer[idx] = ((x + y) * np.pi) % IDM.LANE_CHANGE_DELAY
+        self.impact[idx] = 0.0
+        self.impact_pending[idx] = False
+        self.crashed[idx] = False
+        self.time[idx] = 0
+
+    # ----- neighbours, IDM and MOBIL ----------------------------------------------------------
+    def _lane_neighbours(self, order: "_RoadOrder") -> tuple[np.ndarray, np.ndarray]:
+        """front[l, n, i] / rear[l, n, i]: the nearest car ahead of / behind car i among the cars
+        on lane l (within half a lane plus 1 m of its centre: Lane.on_lane with margin 1), as
+        ``Road.neighbour_vehicles(i, lane l)`` finds them; ``self.v`` where there is none."""
+        lanes = self.config.lanes
+        front = np.empty((lanes, self.num_envs, self.v), dtype=np.int64)
+        rear = np.empty_like(front)
+        for lane in range(lanes):
+            on = np.abs(self.y - lane * LANE_WIDTH) <= LANE_WIDTH / 2 + 1
+            front[lane], rear[lane] = order.ahead(on), order.behind(on)
+        return front, rear
+
+    @staticmethod
+    def _desired_gap(e: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """IDMVehicle.desired_gap for gathered cars e (ego) and f (front), velocities projected
+        on the ego's heading."""
+        _, vx, vy, speed, _, cos, sin = e
+        dv = (vx - f[1]) * cos + (vy - f[2]) * sin
+        ab = -IDM.COMFORT_ACC_MAX * IDM.COMFORT_ACC_MIN
+        return IDM.DISTANCE_WANTED + speed * IDM.TIME_WANTED + speed * dv / (2 * np.sqrt(ab))
+
+    def _idm(self, cars: _Cars, ego: Optional[np.ndarray], front: np.ndarray,
+             delta: np.ndarray) -> np.ndarray:
+        """IDMVehicle.acceleration(ego_vehicle=ego, front_vehicle=front), with the deciding car's
+        exponent `delta`; 0 where there is no ego car (index ``self.v``). ``ego=None`` means each
+        car itself, deciding for itself (its free-road term is computed once a frame)."""
+        f = cars.take(front, _Cars.FRONT)
+        if ego is None:
+            e, accel = cars.own, cars.free_own
+        else:
+            e = cars.take(ego)
+            accel = IDM.COMFORT_ACC_MAX * (1 - np.power(np.maximum(e[3], 0) / e[4], delta))
+        interaction = IDM.COMFORT_ACC_MAX * np.power(self._desired_gap(e, f) / _not_zero(f[0] - e[0]), 2)
+        accel = np.where(front < self.v, accel - interaction, accel)
+        return accel if ego is None else np.where(ego < self.v, accel, 0.0)
+
+    def _lane_changes(self, cars: _Cars, order: _RoadOrder, follow: np.ndarray, rear: np.ndarray) -> None:
+        """IDMVehicle.change_lane_policy for every other car at once: abort a change that
+        another merging car makes unsafe, else every LANE_CHANGE_DELAY ask MOBIL about the lane
+        to the left, then to the right (a yes to the right wins)."""
+        n, v, lanes = self.num_envs, self.v, self.config.lanes
+        idm = (np.arange(v)[None, :] > 0) & ~self.crashed
+        changing = idm & (self.lane != self.target_lane)
+
+        # Abort: a car already heading for my target lane from another lane, close ahead.
+        merging = (self.lane != self.target_lane)  # any car, the ego included
+        merging_ahead = np.full((n, v), v, dtype=np.int64)
+        for lane in range(lanes):
+            merging_ahead = np.where(self.target_lane == lane, order.ahead(merging & (self.target_lane == lane)),
+                                     merging_ahead)
+        me = np.broadcast_to(np.arange(v), (n, v))
+        e, f = cars.own, cars.take(merging_ahead, _Cars.FRONT)
+        distance = f[0] - e[0]
+        abort = changing & (merging_ahead < v) & (distance > 0) & (distance < self._desired_gap(e, f))
+        self.target_lane = np.where(abort, self.lane, self.target_lane)
+
+        # MOBIL, at its own pace.
+        due = idm & ~changing & (self.timer > IDM.LANE_CHANGE_DELAY)
+        self.timer = np.where(due, 0.0, self.timer)
+        ask = due & (np.abs(self.speed) >= 1)
+        if not ask.any():
+            return
+        rows = np.arange(n)[:, None]
+        self_a = follow[self.lane, rows, me]
+        new_target = self.target_lane.copy()
+        for step in (-1, 1):
+            candidate = self.lane + step
+            valid = ask & (candidate >= 0) & (candidate < lanes)
+            lane = np.clip(candidate, 0, lanes - 1)
+            new_rear = rear[lane, rows, me]
+            # Would my new follower have to brake too hard?
+            follower_a = self._idm(cars, new_rear, me, self.delta)
+            safe = follower_a >= -IDM.LANE_CHANGE_MAX_BRAKING_IMPOSED
+            # Do I gain enough (politeness 0: only my own acceleration counts)?
+            gain = follow[lane, rows, me] - self_a
+            if IDM.POLITENESS:
+                raise NotImplementedError("the twin implements MOBIL with politeness 0, as highway-env's IDMVehicle")
+            new_target = np.where(valid & safe & (gain >= IDM.LANE_CHANGE_MIN_ACC_GAIN), lane, new_target)
+        self.target_lane = new_target
+
+    # ----- control and kinematics -------------------------------------------------------------
+    def _steering(self) -> np.ndarray:
+        """ControlledVehicle.steering_control towards each car's target lane (straight lanes)."""
+        lateral = self.y - self.target_lane * LANE_WIDTH
+        lateral_speed = -KP_LATERAL * lateral
+        heading_command = np.arcsin(np.clip(lateral_speed / _not_zero(self.speed), -1, 1))
+        heading_ref = np.clip(heading_command, -np.pi / 4, np.pi / 4)
+        heading_rate = KP_HEADING * _wrap_to_pi(heading_ref - self.heading)
+        slip = np.arcsin(np.clip(LENGTH / 2 / _not_zero(self.speed) * heading_rate, -1, 1))
+        steering = np.clip(np.arctan(2 * np.tan(slip)), -MAX_STEERING, MAX_STEERING)
+        return np.clip(steering, -MAX_STEERING, MAX_STEERING)
+
+    def _apply_meta_action(self, action: np.ndarray) -> None:
+        """MDPVehicle.act / ControlledVehicle.act for the ego car's decision."""
+        lanes = self.config.lanes
+        faster, slower = action == FASTER, action == SLOWER
+        if faster.any() or slower.any():
+            span = TARGET_SPEEDS[-1] - TARGET_SPEEDS[0]
+            index = np.clip(np.round((self.speed[:, 0] - TARGET_SPEEDS[0]) / span * (TARGET_SPEEDS.size - 1)),
+                            0, TARGET_SPEEDS.size - 1).astype(np.int64)
+            index = np.clip(index + faster.astype(np.int64) - slower.astype(np.int64), 0, TARGET_SPEEDS.size - 1)
+            self.target_speed[:, 0] = np.where(faster | slower, TARGET_SPEEDS[index], self.target_speed[:, 0])
+        step = np.where(action == LANE_LEFT, -1, np.where(action == LANE_RIGHT, 1, 0))
+        lane = np.clip(self.target_lane[:, 0] + step, 0, lanes - 1)
+        reachable = (np.abs(self.y[:, 0] - lane * LANE_WIDTH) <= 2 * LANE_WIDTH) & (self.x[:, 0] >= 0) \
+            & (self.x[:, 0] < ROAD_LENGTH + AbstractLane.VEHICLE_LENGTH)
+        self.target_lane[:, 0] = np.where((step != 0) & reachable, lane, self.target_lane[:, 0])
+
+    def _frame(self, active: np.ndarray) -> None:
+        """One simulation frame (Road.act, Road.step) for the episodes in `active`."""
+        dt = self.config.dt
+        order, cars = _RoadOrder(self.x), _Cars(self)
+        front, rear = self._lane_neighbours(order)
+        # follow[l]: each car's IDM acceleration behind the car ahead of it on lane l
+        follow = np.stack([self._idm(cars, None, front[lane], self.delta) for lane in range(self.config.lanes)])
+        saved = (self.target_lane.copy(), self.timer.copy())
+        self._lane_changes(cars, order, follow, rear)
+        # Frozen (finished) episodes keep their state.
+        self.target_lane = np.where(active[:, None], self.target_lane, saved[0])
+        self.timer = np.where(active[:, None], self.timer, saved[1])
+
+        n, v = self.num_envs, self.v
+        rows = np.arange(n)[:, None]
+        me = np.broadcast_to(np.arange(v), (n, v))
+        accel = follow[self.lane, rows, me]
+        changing = self.lane != self.target_lane
+        accel = np.where(changing, np.minimum(accel, follow[self.target_lane, rows, me]), accel)
+        accel = np.clip(accel, -IDM.ACC_MAX, IDM.ACC_MAX)
+        accel[:, 0] = KP_A * (self.target_speed[:, 0] - self.speed[:, 0])  # the ego's speed controller
+        steering = self._steering()
+        # Vehicle.clip_actions
+        steering = np.where(self.crashed, 0.0, steering)
+        accel = np.where(self.crashed, -self.speed, accel)
+        accel = np.where(self.speed > MAX_SPEED, np.minimum(accel, MAX_SPEED - self.speed), accel)
+        accel = np.where(self.speed < MIN_SPEED, np.maximum(accel, MIN_SPEED - self.speed), accel)
+
+        # Vehicle.step (IDMVehicle.step advances its timer first)
+        act = active[:, None]
+        self.timer = np.where(act & (me > 0), self.timer + dt, self.timer)
+        beta = np.arctan(0.5 * np.tan(steering))
+        x = self.x + self.speed * np.cos(self.heading + beta) * dt
+        y = self.y + self.speed * np.sin(self.heading + beta) * dt
+        hit = self.impact_pending
+        x, y = x + np.where(hit, self.impact[..., 0], 0.0), y + np.where(hit, self.impact[..., 1], 0.0)
+        heading = self.heading + self.speed * np.sin(beta) / (LENGTH / 2) * dt
+        speed = self.speed + accel * dt
+        self.x, self.y = np.where(act, x, self.x), np.where(act, y, self.y)
+        self.heading, self.speed = np.where(act, heading, self.heading), np.where(act, speed, self.speed)
+        self.crashed |= hit & act
+        self.impact_pending &= ~act
+        lane_centres = np.arange(self.config.lanes) * LANE_WIDTH
+        self.lane = np.argmin(np.abs(self.y[..., None] - lane_centres), axis=-1)
+        self._collide(active, dt)
+
+    def _collide(self, active: np.ndarray, dt: float) -> None:
+        """RoadObject.handle_collisions(ego, other) for every other car, in list order.
+
+        The spherical pre-check runs on all (episode, car) pairs; the separating-axis test only
+        on the few pairs that pass it."""
+        ego_x, ego_y, ego_speed = self.x[:, :1], self.y[:, :1], self.speed[:, :1]
+        near = np.hypot(self.x[:, 1:] - ego_x, self.y[:, 1:] - ego_y) <= DIAGONAL + ego_speed * dt
+        near &= active[:, None]
+        if not near.any():
+            return
+        env, car = np.nonzero(near)
+        car = car + 1
+        intersecting, will, tx, ty = _separating_axes(
+            (self.x[env, 0], self.y[env, 0], self.heading[env, 0], self.speed[env, 0]),
+            (self.x[env, car], self.y[env, car], self.heading[env, car], self.speed[env, car]), dt)
+        # The ego's impact is set by the last car (in list order) that will hit it; np.nonzero
+        # lists pairs in (episode, car) order, so the last assignment per episode wins.
+        hit = np.flatnonzero(will)
+        self.impact[env[hit], 0] = np.stack([tx[hit], ty[hit]], axis=1) / 2
+        self.impact_pending[env[hit], 0] = True
+        self.impact[env[hit], car[hit]] = -np.stack([tx[hit], ty[hit]], axis=1) / 2
+        self.impact_pending[env[hit], car[hit]] = True
+        crash = np.flatnonzero(intersecting)
+        self.crashed[env[crash], 0] = True
+        self.crashed[env[crash], car[crash]] = True
+
+    # ----- the decision step --------------------------------------------------------------------
+    def step(self, actions: np.ndarray, active: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One decision (highway-env meta-action index per episode) and its frames.
+
+        Returns (reward, terminated, truncated) per episode. Episodes outside `active` stay as
+        they are (reward 0)."""
+        actions = np.asarray(actions, dtype=np.int64).reshape(self.num_envs)
+        active = np.ones(self.num_envs, dtype=bool) if active is None else np.asarray(active, dtype=bool)
+        self.time = np.where(active, self.time + 1, self.time)
+        saved_lane, saved_speed = self.target_lane[:, 0].copy(), self.target_speed[:, 0].copy()
+        self._apply_meta_action(actions)
+        self.target_lane[:, 0] = np.where(active, self.target_lane[:, 0], saved_lane)
+        self.target_speed[:, 0] = np.where(active, self.target_speed[:, 0], saved_speed)
+        for _ in range(self.config.frames):
+            self._frame(active)
+        reward = np.where(active, self.reward(), 0.0)
+        terminated = self.crashed[:, 0].copy()
+        truncated = self.time >= self.config.duration
+        return reward, terminated, truncated
+
+    def reward(self) -> np.ndarray:
+        """HighwayEnv._reward: collision, right lane (by target lane), high forward speed,
+        mapped to [0, 1], times on-road."""
+        c = self.config
+        forward = self.speed[:, 0] * np.cos(self.heading[:, 0])
+        low, high = c.reward_speed_range
+        speed_term = np.clip((forward - low) / (high - low), 0, 1)
+        lane_term = self.target_lane[:, 0] / max(c.lanes - 1, 1)
+        raw = c.collision_reward * self.crashed[:, 0] + c.right_lane_reward * lane_term + c.high_speed_reward * speed_term
+        best = c.high_speed_reward + c.right_lane_reward
+        normalized = (raw - c.collision_reward) / (best - c.collision_reward)
+        on_road = (np.abs(self.y[:, 0] - self.lane[:, 0] * LANE_WIDTH) <= LANE_WIDTH / 2) \
+            & (self.x[:, 0] >= -AbstractLane.VEHICLE_LENGTH) & (self.x[:, 0] < ROAD_LENGTH + AbstractLane.VEHICLE_LENGTH)
+        return normalized * on_road
+
+    def forward_speed(self) -> np.ndarray:
+        return self.speed[:, 0] * np.cos(self.heading[:, 0])
+
+    def features(self) -> np.ndarray:
+        """Our six features per episode, (envs, 6) float32, as ``highway.kinematics_to_features``
+        computes them from a Kinematics observation of the 4 cars nearest along the road."""
+        c, n = self.config, self.num_envs
+        ego_x, ego_y = self.x[:, :1], self.y[:, :1]
+        dx = (self.x[:, 1:] - ego_x).astype(np.float32)
+        dy = (self.y[:, 1:] - ego_y).astype(np.float32)
+        seen = np.hypot(self.x[:, 1:] - ego_x, self.y[:, 1:] - ego_y) < c.perception
+        key = np.where(seen, np.abs(self.x[:, 1:] - ego_x), np.inf)
+        nearest = np.argsort(key, axis=1, kind="stable")[:, :OBSERVED]
+        observed = np.take_along_axis(seen, nearest, axis=1)
+        dx, dy = np.take_along_axis(dx, nearest, axis=1), np.take_along_axis(dy, nearest, axis=1)
+        ego_y32 = ego_y.astype(np.float32)
+        lane = np.clip(np.rint(ego_y32[:, 0] / LANE_WIDTH), 0, c.lanes - 1).astype(np.int64)
+        other_lane = np.rint((ego_y32 + dy) / LANE_WIDTH).astype(np.int64)
+        distance = np.where(observed, np.abs(dx), np.inf)
+
+        def nearest_in(mask: np.ndarray) -> np.ndarray:
+            return np.minimum(np.min(np.where(mask, distance, RANGE), axis=1), RANGE) / RANGE
+
+        same = other_lane == lane[:, None]
+        gap_ahead = nearest_in(same & (dx > 0))
+        gap_behind = nearest_in(same & (dx <= 0))
+        left = np.where(lane > 0, nearest_in(other_lane == (lane - 1)[:, None]), 0.0)
+        right = np.where(lane < c.lanes - 1, nearest_in(other_lane == (lane + 1)[:, None]), 0.0)
+        position = lane / (c.lanes - 1)
+        vx = (self.speed[:, 0] * np.cos(self.heading[:, 0])).astype(np.float32)
+        speed = np.clip(vx / SPEED_SCALE, 0.0, 1.0)
+        out = np.stack([gap_ahead, gap_behind, left, right, position, speed], axis=1).astype(np.float32)
+        assert out.shape == (n, 6)
+        return out
+
+
+def copy_scene_to(env: Any, twin: HighwayTwin, episode: int) -> None:
+    """Put twin episode `episode`'s scene into a freshly reset highway-env env (``HighwayFeatures``
+    or highway-env's own), car by car: to watch a twin scene in highway-env's viewer, and to
+    check the twin against highway-env from the same scene."""
+    highway = getattr(env, "highway", env)
+    road = highway.road
+    if len(road.vehicles) != twin.v:
+        raise ValueError(f"highway-env has {len(road.vehicles)} cars, the twin {twin.v}")
+    for i, car in enumerate(road.vehicles):
+        car.position = np.array([twin.x[episode, i], twin.y[episode, i]])
+        car.heading, car.speed = float(twin.heading[episode, i]), float(twin.speed[episode, i])
+        car.lane_index = ("0", "1", int(twin.lane[episode, i]))
+        car.lane = road.network.get_lane(car.lane_index)
+        car.target_lane_index = ("0", "1", int(twin.target_lane[episode, i]))
+        car.target_speed = float(twin.target_speed[episode, i])
+        car.crashed, car.impact = bool(twin.crashed[episode, i]), None
+        if i == 0:
+            car.speed_index = car.speed_to_index(car.target_speed)
+        else:
+            car.DELTA, car.timer = float(twin.delta[episode, i]), float(twin.timer[episode, i])
