@@ -31,6 +31,9 @@ test: setup            ## the test suite (CI runs this)
 corpus:                ## refresh the shipped corpus copy from ../shared/corpus
 	cp ../shared/corpus/README.md ../shared/corpus/BRIEFING.md ../shared/corpus/vocabulary.json \
 	   ../shared/corpus/taxi.jsonl ../shared/corpus/highway.jsonl src/nl2policy/data/corpus/
+	mkdir -p src/nl2policy/data/corpus/round2
+	cp ../shared/corpus/round2/README.md ../shared/corpus/round2/taxi.jsonl ../shared/corpus/round2/highway.jsonl \
+	   src/nl2policy/data/corpus/round2/
 
 results-foundation: setup   ## results/foundation/tree_returns.md
 	$(BIN)/nl2policy corpus-returns --domain taxi --screen-episodes 100 --episodes 2000 --seed 0 --out results/foundation

@@ -51,16 +51,15 @@ console = Console()
 
 
 def corpus_trees() -> list[dict]:
-    """Distinct highway trees of the shipped corpus (both rounds where present), as JSON."""
+    """Distinct highway trees of the corpus's first round (the writers' own trees), as JSON."""
     seen, trees = set(), []
-    for path in sorted(corpus_dir().rglob("highway.jsonl")):
-        for line in path.read_text().splitlines():
-            if line.strip():
-                tree = json.loads(line)["tree"]
-                key = json.dumps(tree, sort_keys=True)
-                if key not in seen:
-                    seen.add(key)
-                    trees.append(tree)
+    for line in (corpus_dir() / "highway.jsonl").read_text().splitlines():
+        if line.strip():
+            tree = json.loads(line)["tree"]
+            key = json.dumps(tree, sort_keys=True)
+            if key not in seen:
+                seen.add(key)
+                trees.append(tree)
     return trees
 
 

@@ -12,7 +12,8 @@ def test_shipped_copy_matches_shared_corpus_when_present():
     shared = PACKAGE_DATA.parents[2].parent / "shared" / "corpus"
     if not shared.is_dir():
         pytest.skip("no ../shared/corpus beside this checkout (a clone elsewhere)")
-    for name in ("vocabulary.json", "taxi.jsonl", "highway.jsonl", "BRIEFING.md", "README.md"):
+    for name in ("vocabulary.json", "taxi.jsonl", "highway.jsonl", "BRIEFING.md", "README.md",
+                 "round2/README.md", "round2/taxi.jsonl", "round2/highway.jsonl"):
         assert (shared / name).read_bytes() == (PACKAGE_DATA / "corpus" / name).read_bytes(), f"run `make corpus`: {name}"
 
 
@@ -22,6 +23,17 @@ def test_load_with_writers():
         assert len(specs) == 200
         assert len(writers(specs)) == 8
         assert all(s.domain == domain and s.description for s in specs)
+
+
+def test_second_round_ships_beside_the_first_with_new_trees_and_writers():
+    for domain in ("taxi", "highway"):
+        first, second = load_corpus(domain), load_corpus(domain, rounds=(2,))
+        assert len(second) == 120 and len(load_corpus(domain, rounds=(1, 2))) == 320
+        assert set(writers(second)) == {"voice", "teen", "engineer", "memo"}
+        assert not set(writers(first)) & set(writers(second))
+        assert not {s.tree for s in first} & {s.tree for s in second}  # round 2's trees are all new
+    with pytest.raises(ValueError, match="no collection round 3"):
+        load_corpus("taxi", rounds=(3,))
 
 
 def test_env_var_points_elsewhere(tmp_path, monkeypatch):

@@ -28,10 +28,24 @@ class Spec:
     description: str
 
 
-def load_corpus(domain: str, folder: Optional[Path] = None) -> list[Spec]:
-    """All specs of `domain`, trees validated; a bad line raises with its file and line."""
+ROUND_FOLDERS = {1: ".", 2: "round2"}
+"""Where each collection round lies in the corpus folder. Round 1: the writers' own trees
+(the paper's protocol runs on it alone); round 2: trees sampled from the tree grammar, none
+of them in round 1, described by four other writers."""
+
+
+def load_corpus(domain: str, folder: Optional[Path] = None, rounds: Sequence[int] = (1,)) -> list[Spec]:
+    """The specs of `domain` from the given collection rounds, trees validated; a bad line
+    raises with its file and line."""
+    unknown = sorted(set(rounds) - set(ROUND_FOLDERS))
+    if unknown:
+        raise ValueError(f"no collection round {unknown[0]}; rounds: {sorted(ROUND_FOLDERS)}")
+    return [spec for r in rounds for spec in _load_file((folder or corpus_dir()) / ROUND_FOLDERS[r] / f"{domain}.jsonl",
+                                                       domain)]
+
+
+def _load_file(path: Path, domain: str) -> list[Spec]:
     vocab = get_domain(domain).vocab
-    path = (folder or corpus_dir()) / f"{domain}.jsonl"
     specs = []
     for lineno, line in enumerate(path.read_text().splitlines(), 1):
         if not line.strip():
