@@ -101,13 +101,14 @@ def test_ppo_improves_a_deliberately_bad_taxi_tree_judged_exactly(tmp_path):
 
 
 def test_actor_learning_rate_scale_survives_sb3s_schedule():
-    from nl2policy.policy.sb3_policy import ACTOR_LR_SCALE, PPO_SETTINGS
+    from nl2policy.domains import get_domain
 
+    knobs = get_domain("taxi").knobs
     model = make_ppo("taxi", "tree_ddt", seed=0, tree=TREE)
     model.learn(512)  # SB3 resets every group's lr before each update; TreePPO rescales the actor's
     lrs = {group["lr_scale"]: group["lr"] for group in model.policy.optimizer.param_groups}
-    base = PPO_SETTINGS["taxi"]["learning_rate"]
-    assert lrs == pytest.approx({1.0: base, ACTOR_LR_SCALE["taxi"]: base * ACTOR_LR_SCALE["taxi"]})
+    base = knobs.ppo.learning_rate
+    assert lrs == pytest.approx({1.0: base, knobs.actor_lr_scale: base * knobs.actor_lr_scale})
 
 
 def test_ppo_leaves_no_log_folders(tmp_path, monkeypatch):

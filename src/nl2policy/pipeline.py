@@ -56,10 +56,9 @@ def run_pipeline(console: Console, err: Console, domain: str, text: str, steps: 
     table.add_row("translated tree", f"{summary['initial_mean_return']:.2f}")
     table.add_row("trained DDT (soft)", f"{summary['final_soft_ddt_return']:.2f}")
     table.add_row("trained tree (discretized)", f"{summary['final_mean_return']:.2f}")
-    if domain == "taxi":
-        from nl2policy.domains.taxi import TaxiModel, optimal_policy
-
-        table.add_row("optimal (value iteration)", f"{optimal_policy(TaxiModel())[0]:.2f}")
+    exact = get_domain(domain).exact
+    if exact is not None:
+        table.add_row("optimal (value iteration)", f"{exact.optimum():.2f}")
     console.print(table)
     console.print(f"files in {out}: initial_tree.json, final_tree.json, curve.csv, curve.png, summary.json")
     return summary

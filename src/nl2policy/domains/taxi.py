@@ -223,3 +223,18 @@ def optimal_policy(model: TaxiModel = TaxiModel()) -> tuple[float, dict[TaxiStat
 def expected_return(model: TaxiModel, policy: Callable[[np.ndarray], int]) -> float:
     """Exact expected fares per shift of a policy that sees only the features."""
     return _backward(model, lambda s: policy(s.features()))[0]
+
+
+class TaxiExact:
+    """Taxi's exact model as the domain's capability (``taxi.toml``'s ``exact_model``):
+    what ``Domain.exact`` returns, so policy code asks the domain instead of naming taxi."""
+
+    def __init__(self, model: TaxiModel = TaxiModel()) -> None:
+        self.model = model
+
+    def expected_return(self, act: Callable[[np.ndarray], int]) -> float:
+        return expected_return(self.model, act)
+
+    def optimum(self) -> float:
+        return optimal_policy(self.model)[0]
+

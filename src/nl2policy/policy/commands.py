@@ -21,7 +21,7 @@ def optimize(
     steps: int = typer.Option(20_000, min=1, help="PPO env steps"),
     seed: int = typer.Option(0),
     out: Path = typer.Option(Path("runs/optimize"), help="Output folder; holding a checkpoint, the run resumes"),
-    eval_episodes: Optional[int] = typer.Option(None, min=1, help="Episodes for the before/after returns (default: taxi 200, highway 10)"),
+    eval_episodes: Optional[int] = typer.Option(None, min=1, help="Episodes for the before/after returns (default: the domain's eval_episodes, domains/<name>.toml)"),
 ) -> None:
     """Improve a tree with PPO (tree -> DDT -> PPO -> tree); writes trees, curve and summary.json."""
     import torch
@@ -112,3 +112,4 @@ def policy_fidelity(
         domain_or_fail(name)
     command = f"nl2policy policy-fidelity --states {states} --out {out}" + "".join(f" --domain {d}" for d in domain or [])
     console.print(write_fidelity(states, out, command, domains).read_text())
+

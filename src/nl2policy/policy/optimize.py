@@ -18,13 +18,15 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
+from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn
 from nl2policy.policy.rollout import evaluate, tree_policy
-from nl2policy.policy.sb3_policy import PPO_SETTINGS, TreePPO, actor_ddt, make_ppo, make_vec_env, soft_act_fn
+from nl2policy.policy.sb3_policy import TreePPO, actor_ddt, make_ppo, make_vec_env, soft_act_fn
 from nl2policy.trees import Tree, tree_to_json
 
-WINDOW = {"taxi": 100, "highway": 20}  # episodes in the rolling mean of training reward
-EVAL_EPISODES = {"taxi": 200, "highway": 10}
+# Each domain's rolling window (Knobs.rolling_window), by name, for app/runs.py, which reads it
+# from here; everything in this package reads the knobs.
+WINDOW = {name: get_domain(name).knobs.rolling_window for name in DOMAINS}
 EVAL_SEED = 50_000  # evaluation episodes use seeds far from the training env's
 CHECKPOINT = "checkpoint.zip"
 STATE = "state.json"
@@ -51,18 +53,18 @@ class EpisodeLog(BaseCallback):
 def checkpoint_tree_score(domain: str) -> Optional[Callable[[PPO], tuple[dict, float]]]:
     """How to score the discretized tree at each checkpoint, or None where that is too dear.
 
-    Taxi: the exact expected return of the discretized tree (``domains.taxi.expected_return``,
-    ~0.1 s, no sampling noise). PPO's discretized tree wanders between checkpoints (measured:
+    With an exact model (taxi): the exact expected return of the discretized tree (~0.1 s, no
+    sampling noise). PPO's discretized tree wanders between checkpoints (measured:
     results/policy/tuning_taxi.md), so the run also keeps the best tree it passed through,
     the way one keeps the best checkpoint on a validation score. Highway has no exact model
     and sampled episodes cost seconds each, so nothing is tracked there."""
-    if domain != "taxi":
+    exact = get_domain(domain).exact
+    if exact is None:
         return None
-    from nl2policy.domains.taxi import TaxiModel, expected_return
 
     def score(model: PPO) -> tuple[dict, float]:
         tree = ddt_to_tree(domain, actor_ddt(model))
-        return tree_to_json(tree), expected_return(TaxiModel(), tree_act_fn(domain, tree))
+        return tree_to_json(tree), exact.expected_return(tree_act_fn(domain, tree))
 
     return score
 
@@ -92,7 +94,7 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
         if score_tree is not None:
             tree_json, score = score_tree(model)
             best = {"step": 0, "tree": tree_json, "score": score}
-    rollout = PPO_SETTINGS[domain]["n_steps"]
+    rollout = model.n_steps
     chunk = rollout * max(1, steps // (10 * rollout))  # about ten checkpoints per run
     log = EpisodeLog(episodes, steps, progress)
     while model.num_timesteps < steps:
@@ -165,9 +167,10 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
     (out / "final_tree.json").write_text(json.dumps(tree_to_json(final_tree), indent=2))
     if best is not None:
         (out / "best_tree.json").write_text(json.dumps(best["tree"], indent=2))
-    window = WINDOW[domain]
+    knobs = get_domain(domain).knobs
+    window = knobs.rolling_window
     write_curve(episodes, window, out, f"{domain}: PPO from the tree-initialized DDT (seed {seed})")
-    n = eval_episodes or EVAL_EPISODES[domain]
+    n = eval_episodes or knobs.eval_episodes
     rolling = rolling_mean([r for _, r in episodes], window)
     summary = {
         "domain": domain, "seed": seed, "steps": int(model.num_timesteps), "seconds": round(seconds, 2),
@@ -181,11 +184,10 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
         "last_rolling_return": float(rolling[-1]) if len(rolling) else None,
     }
     summary["discretization_gap"] = summary["final_mean_return"] - summary["final_soft_ddt_return"]
-    if best is not None:  # taxi: exact expected returns of the initial, final and best-checkpoint trees
-        from nl2policy.domains.taxi import TaxiModel, expected_return
-
-        summary["exact_initial_tree"] = expected_return(TaxiModel(), tree_act_fn(domain, tree))
-        summary["exact_final_tree"] = expected_return(TaxiModel(), tree_act_fn(domain, final_tree))
+    if best is not None:  # exact model: exact expected returns of the initial, final and best-checkpoint trees
+        exact = get_domain(domain).exact
+        summary["exact_initial_tree"] = exact.expected_return(tree_act_fn(domain, tree))
+        summary["exact_final_tree"] = exact.expected_return(tree_act_fn(domain, final_tree))
         summary["exact_best_tree"], summary["best_tree_step"] = best["score"], best["step"]
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
