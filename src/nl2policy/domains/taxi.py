@@ -238,3 +238,8 @@ class TaxiExact:
     def optimum(self) -> float:
         return optimal_policy(self.model)[0]
 
+    def tables(self):
+        """The model as arrays over feature states (``taxi_tables``), for exhaustive searches."""
+        from nl2policy.domains.taxi_tables import taxi_tables
+
+        return taxi_tables(self.model)

@@ -13,6 +13,7 @@ def register(app: typer.Typer) -> None:
     app.command("optimize")(optimize)
     app.command("policy-experiment")(policy_experiment)
     app.command("policy-fidelity")(policy_fidelity)
+    app.command("ceilings")(ceilings)
 
 
 def optimize(
@@ -113,3 +114,22 @@ def policy_fidelity(
     command = f"nl2policy policy-fidelity --states {states} --out {out}" + "".join(f" --domain {d}" for d in domain or [])
     console.print(write_fidelity(states, out, command, domains).read_text())
 
+
+def ceilings(
+    domain: str = typer.Option(..., help="A domain with an exact model (taxi)"),
+    max_depth: int = typer.Option(3, min=1, max=3, help="Deepest dictionary trees to search (the grid allows 3)"),
+    out: Path = typer.Option(Path("results/policy"), help="Folder for ceilings_<domain>.md / .json"),
+) -> None:
+    """The domain's yardsticks by exact search: optimum, best stationary feature policy, best trees."""
+    from nl2policy.cli import console, domain_or_fail, fail, progress_bar
+    from nl2policy.policy.ceilings_report import compute_ceilings, write_ceilings
+
+    domain_or_fail(domain)
+    command = f"nl2policy ceilings --domain {domain} --max-depth {max_depth} --out {out}"
+    with progress_bar() as bar:
+        task = bar.add_task(f"{domain}: ceilings", total=None)
+        try:
+            result = compute_ceilings(domain, max_depth, progress=lambda text: bar.update(task, description=text))
+        except ValueError as exc:
+            fail(str(exc))
+    console.print(write_ceilings(result, out, command).read_text())
