@@ -70,6 +70,9 @@ class ExactModel(Protocol):
     def expected_return(self, act: Act) -> float:
         """The exact expected episode return of a policy that sees the features."""
 
+    def expected_returns(self, acts: list[Act]) -> list[float]:
+        """``expected_return`` of many policies (searches score thousands)."""
+
     def optimum(self) -> float:
         """The best expected return of any policy (the ceiling)."""
 

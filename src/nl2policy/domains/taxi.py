@@ -238,6 +238,12 @@ class TaxiExact:
     def optimum(self) -> float:
         return optimal_policy(self.model)[0]
 
+    def expected_returns(self, acts: list[Callable[[np.ndarray], int]]) -> list[float]:
+        """``expected_return`` of many policies at once (``taxi_tables``: thousands a second)."""
+        tables = self.tables()
+        X = tables.features()
+        return [float(v) for v in tables.returns(np.array([[act(x) for x in X] for act in acts]).reshape(len(acts), -1))]
+
     def tables(self):
         """The model as arrays over feature states (``taxi_tables``), for exhaustive searches."""
         from nl2policy.domains.taxi_tables import taxi_tables

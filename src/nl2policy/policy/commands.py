@@ -23,8 +23,9 @@ def optimize(
     seed: int = typer.Option(0),
     out: Path = typer.Option(Path("runs/optimize"), help="Output folder; holding a checkpoint, the run resumes"),
     eval_episodes: Optional[int] = typer.Option(None, min=1, help="Episodes for the before/after returns (default: the domain's eval_episodes, domains/<name>.toml)"),
+    polish: Optional[bool] = typer.Option(None, "--polish/--no-polish", help="Hill-climb the kept tree on the exact model (default: on where the domain has one, taxi)"),
 ) -> None:
-    """Improve a tree with PPO (tree -> DDT -> PPO -> tree); writes trees, curve and summary.json."""
+    """Improve a tree with PPO (tree -> DDT -> PPO -> tree), never returning a worse tree; writes trees, curve and summary.json."""
     import torch
 
     from nl2policy.cli import console, domain_or_fail, fail, progress_bar, tree_or_fail
@@ -37,16 +38,16 @@ def optimize(
     with progress_bar() as bar:
         task = bar.add_task(f"{domain}: PPO steps", total=steps)
         try:
-            summary = optimize_tree(domain, parsed, steps, seed, out, eval_episodes=eval_episodes,
+            summary = optimize_tree(domain, parsed, steps, seed, out, eval_episodes=eval_episodes, polish=polish,
                                     progress=lambda n, total: bar.update(task, completed=n))
         except ValueError as exc:
             fail(str(exc))
     console.print("[bold]before[/]\n" + to_text(parsed, d.vocab))
     final = json.loads((out / "final_tree.json").read_text())
     if summary["final_tree_has_raw_tests"]:
-        console.print("[bold]after[/] (has raw threshold tests)\n" + json.dumps(final, indent=2))
+        console.print(f"[bold]after[/] ({summary['returned']}; has raw threshold tests)\n" + json.dumps(final, indent=2))
     else:
-        console.print("[bold]after[/]\n" + to_text(parse_tree(final, d.vocab), d.vocab))
+        console.print(f"[bold]after[/] ({summary['returned']})\n" + to_text(parse_tree(final, d.vocab), d.vocab))
     print(json.dumps(summary))
 
 
