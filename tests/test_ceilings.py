@@ -102,3 +102,16 @@ def test_ceilings_cli_refuses_a_domain_without_an_exact_model(tmp_path):
     assert result.exit_code == 2
     assert result.output.strip().splitlines() == ["error: ceilings need an exact model to search; highway has none"]
     assert not list(tmp_path.iterdir())
+
+
+def test_stochastic_policies_are_scored_exactly(tables):
+    """One-hot probabilities give the stationary return; uniform ones the random policy's."""
+    from nl2policy.policy.rollout import evaluate, random_policy
+
+    rng = np.random.default_rng(0)
+    policies = rng.integers(4, size=(5, tables.n_states))
+    one_hot = np.eye(4)[policies]
+    assert np.allclose(tables.mixed_returns(one_hot), tables.returns(policies), atol=1e-12, rtol=0)
+    uniform = get_domain("taxi").exact.expected_return_mixed(lambda X: np.full((len(X), 4), 0.25))
+    sampled = evaluate("taxi", random_policy("taxi", 3), episodes=400, seed=3)
+    assert abs(sampled.mean_return - uniform) < 4 * sampled.stderr

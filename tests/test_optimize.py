@@ -144,6 +144,8 @@ def test_returned_tree_is_never_worse_than_the_start_on_the_exact_model(start, p
     assert summary["exact_final_tree"] >= summary["exact_best_tree"] >= summary["exact_initial_tree"] == start_value
     assert summary["exact_best_tree"] >= summary["keep_best"]["best_checkpoint_score"]
     assert ("polish" in summary) == polish and ("polished_tree.json" in {p.name for p in tmp_path.iterdir()}) == polish
+    assert summary["exact_discretization_gap"] == summary["exact_last_tree"] - summary["exact_soft_ddt"]
+    assert 0.0 <= summary["exact_soft_ddt"] <= exact.optimum()
 
 
 def test_keep_best_keeps_the_start_unless_a_checkpoint_is_strictly_better():

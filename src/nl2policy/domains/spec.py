@@ -73,6 +73,10 @@ class ExactModel(Protocol):
     def expected_returns(self, acts: list[Act]) -> list[float]:
         """``expected_return`` of many policies (searches score thousands)."""
 
+    def expected_return_mixed(self, action_probs: Callable[[np.ndarray], np.ndarray]) -> float:
+        """The exact expected return of a stochastic policy: `action_probs` maps feature
+        vectors (n, features) to action probabilities (n, actions)."""
+
     def optimum(self) -> float:
         """The best expected return of any policy (the ceiling)."""
 

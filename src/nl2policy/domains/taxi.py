@@ -244,6 +244,12 @@ class TaxiExact:
         X = tables.features()
         return [float(v) for v in tables.returns(np.array([[act(x) for x in X] for act in acts]).reshape(len(acts), -1))]
 
+    def expected_return_mixed(self, action_probs: Callable[[np.ndarray], np.ndarray]) -> float:
+        """Exact expected return of a stochastic policy (a soft DDT that samples its action):
+        ``action_probs`` maps a batch of feature vectors (n, 6) to probabilities (n, 4)."""
+        tables = self.tables()
+        return float(tables.mixed_returns(np.asarray(action_probs(tables.features()))[None])[0])
+
     def tables(self):
         """The model as arrays over feature states (``taxi_tables``), for exhaustive searches."""
         from nl2policy.domains.taxi_tables import taxi_tables

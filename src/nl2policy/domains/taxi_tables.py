@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import Callable
 
 import numpy as np
 
@@ -93,14 +94,25 @@ class TaxiTables:
         return of that stationary policy; with more, an upper bound on every stationary
         policy that picks among them (each is one of the policies maximised over)."""
         allowed = np.asarray(allowed, dtype=bool)
-        n, horizon, longest = allowed.shape[0], self.model.shift_ticks, int(self.ticks.max())
+        return self._backward(len(allowed), lambda q: np.where(allowed, q, -np.inf).max(axis=2))
+
+    def mixed_returns(self, probs: np.ndarray) -> np.ndarray:
+        """Exact expected return of each stochastic stationary policy, ``probs`` (P, S, A) the
+        probability of each action in each feature state (a soft DDT acting by sampling)."""
+        probs = np.asarray(probs, dtype=np.float64)
+        return self._backward(len(probs), lambda q: (probs * q).sum(axis=2))
+
+    def _backward(self, n: int, value_of: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        """Backward induction for `n` policies at once; `value_of` turns Q (n, S, A) at a
+        tick into V (n, S)."""
+        horizon, longest = self.model.shift_ticks, int(self.ticks.max())
         values = np.zeros((n, horizon + longest + 1, self.n_states))
         states = np.arange(self.n_states)
         for t in range(horizon - 1, -1, -1):
             future = values[:, t + self.ticks, :]  # (P, S, A, S): V at each action's arrival tick
             q = self.reward + np.einsum("sak,psak->psa", self.next_prob, future)
             q = np.where(t + self.ticks <= horizon, q, 0.0)
-            values[:, t, states] = np.where(allowed, q, -np.inf).max(axis=2)
+            values[:, t, states] = value_of(q)
         return values[:, 0, :] @ self.initial
 
 

@@ -29,7 +29,7 @@ from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn
 from nl2policy.policy.keep_best import keep_best, tree_scorer
 from nl2policy.policy.rollout import evaluate, tree_policy
-from nl2policy.policy.sb3_policy import TreePPO, actor_ddt, make_ppo, make_vec_env, soft_act_fn
+from nl2policy.policy.sb3_policy import TreePPO, action_probs_fn, actor_ddt, make_ppo, make_vec_env, soft_act_fn
 from nl2policy.trees import Tree, tree_to_json
 
 # Each domain's rolling window (Knobs.rolling_window), by name, for app/runs.py, which reads it
@@ -225,10 +225,12 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
                              "candidates_scored": polished.candidates_scored, "seconds": round(polished.seconds, 2)}
     if d.exact is not None:  # exact expected returns of every tree above
         summary["exact_initial_tree"] = initial_score
-        summary["exact_last_tree"] = d.exact.expected_return(tree_act_fn(domain, last_tree))
+        summary["exact_last_tree"] = float(d.exact.expected_return(tree_act_fn(domain, last_tree)))
+        summary["exact_soft_ddt"] = d.exact.expected_return_mixed(action_probs_fn(model))
+        summary["exact_discretization_gap"] = summary["exact_last_tree"] - summary["exact_soft_ddt"]
         summary["exact_best_tree"], summary["best_tree_step"] = kept_score, best["step"] if kept_from == "checkpoint" else 0
         if polished is not None:
             summary["exact_polished_tree"] = polished.value
-        summary["exact_final_tree"] = d.exact.expected_return(tree_act_fn(domain, final_tree))
+        summary["exact_final_tree"] = float(d.exact.expected_return(tree_act_fn(domain, final_tree)))
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary

@@ -120,3 +120,16 @@ def soft_act_fn(model: PPO, deterministic: bool):
 
     return act
 
+
+
+def action_probs_fn(model: PPO):
+    """The trained policy's action probabilities for a batch of feature vectors (n, features):
+    what it samples from when it acts stochastically."""
+    import torch
+
+    def probs(X):
+        with torch.no_grad():
+            obs = torch.as_tensor(X, dtype=torch.float32, device=model.policy.device)
+            return model.policy.get_distribution(obs).distribution.probs.cpu().numpy()
+
+    return probs
