@@ -179,3 +179,19 @@ def test_polish_refuses_a_domain_without_an_exact_model(tmp_path):
                                  "--out", str(tmp_path)])
     assert result.exit_code == 2
     assert result.output.strip().splitlines()[-1] == "error: --polish needs an exact model; highway has none"
+
+
+def test_a_checkpoint_from_before_keep_best_resumes(tmp_path):
+    """state.json written before runs tracked trees (highway's had best_tree None) still resumes."""
+    def die_after_first_chunk(n, total):
+        if n > 512:
+            raise Killed
+
+    with pytest.raises(Killed):
+        optimize_tree("taxi", TREE, steps=1024, seed=0, out=tmp_path, progress=die_after_first_chunk, eval_episodes=2)
+    state = json.loads((tmp_path / "state.json").read_text())
+    state["best_tree"] = None
+    (tmp_path / "state.json").write_text(json.dumps(state))
+    summary = optimize_tree("taxi", TREE, steps=1024, seed=0, out=tmp_path, eval_episodes=2, polish=False)
+    assert summary["steps"] == 1024 and summary["keep_best"]["best_checkpoint_step"] >= 512
+    assert summary["exact_final_tree"] >= summary["exact_initial_tree"]

@@ -99,6 +99,9 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
         model = TreePPO.load(ckpt_path, env=make_vec_env(domain, seed + 1000 * (state["chunks"] + 1)), device="cpu")
         episodes, seconds, chunks = [tuple(e) for e in state["episodes"]], state["seconds"], state["chunks"]
         best = state.get("best_tree")
+        if best is None and score_tree is not None:  # a checkpoint from before its run tracked trees
+            tree_json, score = score_tree(model)
+            best = {"step": int(model.num_timesteps), "tree": tree_json, "score": score}
     else:
         model, episodes, seconds, chunks = model_factory(), [], 0.0, 0
         best = None

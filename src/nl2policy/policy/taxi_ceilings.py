@@ -31,7 +31,10 @@ What is searched.
   also induces, so valid and unrestricted trees give the same maps.
 * The depth-3 search: for each root question, every depth-2 yes-side map is bounded with the
   no side free and every depth-2 no-side map with the yes side free; a pair can beat the
-  incumbent only if both bounds do, and the surviving pairs are scored exactly.
+  incumbent only if both bounds do, and the surviving pairs are scored exactly. Every map of a
+  depth-3 tree is such a pair for the tree's root question (or, where a shallower tree induces
+  the same map, for any question: its restrictions are depth-2 maps), and the incumbent starts
+  as the best depth-2 map, scored exhaustively; so nothing is missed.
 """
 
 from __future__ import annotations
