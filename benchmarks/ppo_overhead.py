@@ -12,9 +12,9 @@ import time
 import numpy as np
 import torch
 
-from nl2policy.domains import make_env
+from nl2policy.domains import get_domain, make_env
 from nl2policy.policy.corpus_returns import distinct_trees
-from nl2policy.policy.sb3_policy import METHODS, PPO_SETTINGS, make_ppo
+from nl2policy.policy.sb3_policy import METHODS, make_ppo
 
 
 def raw_step_seconds(domain: str, steps: int) -> float:
@@ -43,7 +43,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     for domain, steps in (("taxi", args.taxi_steps), ("highway", args.highway_steps)):
-        steps = max(steps, PPO_SETTINGS[domain]["n_steps"])
+        steps = max(steps, get_domain(domain).knobs.ppo.n_steps)
         raw = raw_step_seconds(domain, steps)
         print(f"{domain}: raw env step {raw * 1e3:.3f} ms ({steps} random-action steps)")
         for method in METHODS:

@@ -12,7 +12,7 @@ from nl2policy.policy.sb3_policy import actor_ddt, make_ppo
 from nl2policy.trees import Leaf, Node, tree_to_json
 
 TREE = Node("has_passenger", Leaf("go_airport"), Node("heavy_traffic", Leaf("go_village"), Leaf("go_city")))
-FILES = ("initial_tree.json", "final_tree.json", "curve.csv", "curve.png", "summary.json")
+FILES = ("initial_tree.json", "last_tree.json", "best_tree.json", "final_tree.json", "curve.csv", "curve.png", "summary.json")
 runner = CliRunner()
 
 
@@ -101,13 +101,14 @@ def test_ppo_improves_a_deliberately_bad_taxi_tree_judged_exactly(tmp_path):
 
 
 def test_actor_learning_rate_scale_survives_sb3s_schedule():
-    from nl2policy.policy.sb3_policy import ACTOR_LR_SCALE, PPO_SETTINGS
+    from nl2policy.domains import get_domain
 
+    knobs = get_domain("taxi").knobs
     model = make_ppo("taxi", "tree_ddt", seed=0, tree=TREE)
     model.learn(512)  # SB3 resets every group's lr before each update; TreePPO rescales the actor's
     lrs = {group["lr_scale"]: group["lr"] for group in model.policy.optimizer.param_groups}
-    base = PPO_SETTINGS["taxi"]["learning_rate"]
-    assert lrs == pytest.approx({1.0: base, ACTOR_LR_SCALE["taxi"]: base * ACTOR_LR_SCALE["taxi"]})
+    base = knobs.ppo.learning_rate
+    assert lrs == pytest.approx({1.0: base, knobs.actor_lr_scale: base * knobs.actor_lr_scale})
 
 
 def test_ppo_leaves_no_log_folders(tmp_path, monkeypatch):
@@ -119,3 +120,78 @@ def test_ppo_leaves_no_log_folders(tmp_path, monkeypatch):
     model.learn(512)
     assert list(tmp_path.iterdir()) == []
     assert model.num_timesteps == 512
+
+
+STARTS = [  # the best corpus policy (exact 7.94: PPO can only tie or lose), a median one (6.21), a poor one (0)
+    TREE,
+    Node("has_passenger", Leaf("go_airport"), Node("at_city", Leaf("wait"), Leaf("go_city"))),
+    Node("has_passenger", Leaf("go_airport"), Leaf("wait")),
+]
+
+
+@pytest.mark.parametrize("start", STARTS, ids=["best", "median", "poor"])
+@pytest.mark.parametrize("polish", [False, True], ids=["ppo", "polished"])
+def test_returned_tree_is_never_worse_than_the_start_on_the_exact_model(start, polish, tmp_path):
+    from nl2policy.domains import get_domain
+    from nl2policy.policy.convert import tree_act_fn
+    from nl2policy.trees import parse_tree
+
+    exact = get_domain("taxi").exact
+    summary = optimize_tree("taxi", start, steps=1024, seed=1, out=tmp_path, eval_episodes=2, polish=polish)
+    returned = parse_tree(json.loads((tmp_path / "final_tree.json").read_text()), get_domain("taxi").vocab)
+    start_value = exact.expected_return(tree_act_fn("taxi", start))
+    assert exact.expected_return(tree_act_fn("taxi", returned)) >= start_value
+    assert summary["exact_final_tree"] >= summary["exact_best_tree"] >= summary["exact_initial_tree"] == start_value
+    assert summary["exact_best_tree"] >= summary["keep_best"]["best_checkpoint_score"]
+    assert ("polish" in summary) == polish and ("polished_tree.json" in {p.name for p in tmp_path.iterdir()}) == polish
+    assert summary["exact_discretization_gap"] == summary["exact_last_tree"] - summary["exact_soft_ddt"]
+    assert 0.0 <= summary["exact_soft_ddt"] <= exact.optimum()
+
+
+def test_keep_best_keeps_the_start_unless_a_checkpoint_is_strictly_better():
+    from nl2policy.policy.keep_best import keep_best
+
+    other = Node("at_city", Leaf("wait"), Leaf("go_city"))
+    worse, tie, better = ({"tree": tree_to_json(other), "score": s, "step": 512} for s in (4.0, 5.0, 6.0))
+    assert keep_best(TREE, 5.0, worse) == (TREE, 5.0, "initial")
+    assert keep_best(TREE, 5.0, tie) == (TREE, 5.0, "initial")
+    assert keep_best(TREE, 5.0, better) == (other, 6.0, "checkpoint")
+
+
+def test_polish_climbs_to_a_local_optimum_and_never_descends():
+    from nl2policy.domains import get_domain
+    from nl2policy.policy.convert import tree_act_fn
+    from nl2policy.policy.polish import neighbours, polish
+
+    exact = get_domain("taxi").exact
+    poor = STARTS[2]
+    result = polish("taxi", poor)
+    assert result.start_value == 0.0 and result.value > 5.0 and result.rounds >= 1
+    assert exact.expected_return(tree_act_fn("taxi", result.tree)) == result.value
+    around = exact.expected_returns([tree_act_fn("taxi", t) for t in neighbours("taxi", result.tree)])
+    assert max(around) <= result.value + 1e-9  # no single edit improves it
+    assert polish("taxi", result.tree).value == result.value
+
+
+def test_polish_refuses_a_domain_without_an_exact_model(tmp_path):
+    tree = json.dumps({"do": "idle"})
+    result = runner.invoke(app, ["optimize", "--domain", "highway", "--tree", tree, "--steps", "64", "--polish",
+                                 "--out", str(tmp_path)])
+    assert result.exit_code == 2
+    assert result.output.strip().splitlines()[-1] == "error: --polish needs an exact model; highway has none"
+
+
+def test_a_checkpoint_from_before_keep_best_resumes(tmp_path):
+    """state.json written before runs tracked trees (highway's had best_tree None) still resumes."""
+    def die_after_first_chunk(n, total):
+        if n > 512:
+            raise Killed
+
+    with pytest.raises(Killed):
+        optimize_tree("taxi", TREE, steps=1024, seed=0, out=tmp_path, progress=die_after_first_chunk, eval_episodes=2)
+    state = json.loads((tmp_path / "state.json").read_text())
+    state["best_tree"] = None
+    (tmp_path / "state.json").write_text(json.dumps(state))
+    summary = optimize_tree("taxi", TREE, steps=1024, seed=0, out=tmp_path, eval_episodes=2, polish=False)
+    assert summary["steps"] == 1024 and summary["keep_best"]["best_checkpoint_step"] >= 512
+    assert summary["exact_final_tree"] >= summary["exact_initial_tree"]

@@ -33,8 +33,7 @@ def run_compare(console: Console, episodes: int = 10, seed: int = 0, trees_per_d
             ev = evaluate(domain, tree_policy(domain, tree), episodes, seed)
             table.add_row(f"corpus tree #{i} (written {count}x)", f"{ev.mean_return:.2f}", f"{ev.stderr:.2f}")
             console.print(f"[bold]{domain} corpus tree #{i}[/]\n{to_text(tree, vocab)}\n")
-        if domain == "taxi":
-            from nl2policy.domains.taxi import TaxiModel, optimal_policy
-
-            table.add_row("optimal (value iteration, exact)", f"{optimal_policy(TaxiModel())[0]:.2f}", "exact")
+        exact = get_domain(domain).exact
+        if exact is not None:
+            table.add_row("optimal (value iteration, exact)", f"{exact.optimum():.2f}", "exact")
         console.print(table)

@@ -49,17 +49,18 @@ def run_pipeline(console: Console, err: Console, domain: str, text: str, steps: 
         task = bar.add_task(f"{domain}: PPO from the tree", total=steps)
         summary = optimize_tree(domain, tree, steps, seed, out, progress=lambda n, total: bar.update(task, completed=n))
     final = json.loads((out / "final_tree.json").read_text())
-    show_tree(console, "after PPO (discretized)", final, domain)
+    show_tree(console, f"after PPO (returned: {summary['returned']})", final, domain)
     table = Table(title=f"mean return over {summary['eval_episodes']} evaluation episodes")
     table.add_column("policy")
     table.add_column("mean return", justify="right")
     table.add_row("translated tree", f"{summary['initial_mean_return']:.2f}")
     table.add_row("trained DDT (soft)", f"{summary['final_soft_ddt_return']:.2f}")
-    table.add_row("trained tree (discretized)", f"{summary['final_mean_return']:.2f}")
-    if domain == "taxi":
-        from nl2policy.domains.taxi import TaxiModel, optimal_policy
-
-        table.add_row("optimal (value iteration)", f"{optimal_policy(TaxiModel())[0]:.2f}")
+    table.add_row("PPO's last tree (discretized)", f"{summary['last_tree_mean_return']:.2f}")
+    table.add_row(f"returned tree ({summary['returned']})", f"{summary['final_mean_return']:.2f}")
+    exact = get_domain(domain).exact
+    if exact is not None:
+        table.add_row("optimal (value iteration)", f"{exact.optimum():.2f}")
     console.print(table)
-    console.print(f"files in {out}: initial_tree.json, final_tree.json, curve.csv, curve.png, summary.json")
+    console.print(f"files in {out}: initial_tree.json, final_tree.json (returned), last_tree.json, best_tree.json, "
+                  "curve.csv, curve.png, summary.json")
     return summary

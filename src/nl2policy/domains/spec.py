@@ -4,17 +4,24 @@ tests on the policy's input features.
 Every question is one linear test ``w . x > c`` on the feature vector. That single fact is
 what lets a lexical tree become a differentiable decision tree that acts exactly like it
 (the DDT node is ``sigmoid(gamma * (w . x - c))``).
+
+The spec also holds the domain's *knobs* (``Knobs``: DDT sharpness, leaf mass, PPO settings,
+evaluation episodes, ...), each with the reason for its value beside it in the TOML, so that
+the policy code reads one typed record instead of dicts keyed by domain name; and, where the
+domain has one, an *exact model* (``Domain.exact``) that scores a policy without sampling.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import importlib
 import itertools
 import json
 import tomllib
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Callable, Mapping, Optional, Protocol, Sequence
 
 import numpy as np
 
@@ -22,6 +29,56 @@ from nl2policy.data import corpus_dir
 from nl2policy.trees import Leaf, Tree, Vocabulary
 
 SPEC_DIR = Path(__file__).resolve().parent
+
+
+@dataclass(frozen=True)
+class PPOSettings:
+    """Stable-Baselines3 PPO arguments, the same for every method of a domain."""
+
+    n_steps: int
+    batch_size: int
+    n_epochs: int
+    gamma: float  # the discount (not the DDT's sharpness)
+    learning_rate: float
+    ent_coef: float = 0.0  # SB3's default
+
+    def as_kwargs(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class Knobs:
+    """How a domain's trees become DDTs, are trained and are judged. Override one for an
+    experiment with ``dataclasses.replace(domain.knobs, leaf_mass=0.9)`` and pass it down."""
+
+    ddt_gamma: float  # DDT node sharpness: sigmoid(ddt_gamma * (w . x - c))
+    leaf_mass: float  # a fresh leaf's probability on the tree's action
+    match_tolerance: float  # how near a learned threshold must be to a question's to be named by it
+    actor_lr_scale: float  # the DDT actor's learning rate as a multiple of PPO's
+    ppo: PPOSettings
+    eval_episodes: int  # episodes for every sampled before/after return of a tree or DDT
+    rolling_window: int  # episodes in the rolling mean of training reward
+    fidelity_gammas: tuple[float, ...]  # other sharpnesses in the fidelity report's sensitivity rows
+
+
+Act = Callable[[np.ndarray], int]
+
+
+class ExactModel(Protocol):
+    """A domain's exact model: expectations without sampling noise."""
+
+    def expected_return(self, act: Act) -> float:
+        """The exact expected episode return of a policy that sees the features."""
+
+    def expected_returns(self, acts: list[Act]) -> list[float]:
+        """``expected_return`` of many policies (searches score thousands)."""
+
+    def expected_return_mixed(self, action_probs: Callable[[np.ndarray], np.ndarray]) -> float:
+        """The exact expected return of a stochastic policy: `action_probs` maps feature
+        vectors (n, features) to action probabilities (n, actions)."""
+
+    def optimum(self) -> float:
+        """The best expected return of any policy (the ceiling)."""
 
 
 @dataclass(frozen=True)
@@ -35,6 +92,32 @@ class Domain:
     thresholds: np.ndarray = field(repr=False)  # (questions,)
     impossible: tuple[Mapping[str, bool], ...]
     env_id: str
+    knobs: Knobs
+    exact_model: Optional[str] = None  # "module:factory" of an ExactModel, or None
+    one_hot: tuple[str, ...] = ()  # features of which exactly one is 1 (taxi's place); see uniform_states
+
+    @cached_property
+    def exact(self) -> Optional[ExactModel]:
+        """The exact model where the domain has one (taxi), else None (highway): what lets
+        the policy code score a tree without sampling, asked for as a capability."""
+        if self.exact_model is None:
+            return None
+        module, factory = self.exact_model.split(":")
+        return getattr(importlib.import_module(module), factory)()
+
+    def uniform_states(self, n: int, seed: int = 0) -> np.ndarray:
+        """`n` feature vectors spread evenly over what the world can produce: with a one-hot
+        group (taxi), one of its features set uniformly and every other feature 0 or 1;
+        otherwise uniform in the [0, 1] feature box (highway; far more mass near thresholds
+        than real traffic puts there)."""
+        rng = np.random.default_rng(seed)
+        if not self.one_hot:
+            return rng.uniform(0.0, 1.0, size=(n, len(self.features))).astype(np.float32)
+        group = np.eye(len(self.one_hot))[rng.integers(len(self.one_hot), size=n)]
+        rest = [f for f in self.features if f not in self.one_hot]
+        bits = rng.integers(2, size=(n, len(rest)))
+        columns = {**dict(zip(self.one_hot, group.T)), **dict(zip(rest, bits.T))}
+        return np.stack([columns[f] for f in self.features], axis=1).astype(np.float32)
 
     @property
     def questions(self) -> list[str]:
@@ -115,4 +198,28 @@ def load_domain(name: str, corpus: Path | None = None) -> Domain:
             weights[i, features.index(feat)] = w
         thresholds[i] = tests[q]["threshold"]
     impossible = tuple(dict(rule) for rule in spec.get("impossible", []))
-    return Domain(name, vocab, tuple(features), weights, thresholds, impossible, spec["env_id"])
+    one_hot = tuple(spec.get("one_hot", ()))
+    if set(one_hot) - set(features):
+        raise ValueError(f"{spec_path.name}: one_hot names unknown features {sorted(set(one_hot) - set(features))}")
+    return Domain(name, vocab, tuple(features), weights, thresholds, impossible, spec["env_id"],
+                  _knobs(spec, spec_path.name), spec.get("exact_model"), one_hot)
+
+
+def _knobs(spec: dict, file: str) -> Knobs:
+    """The [knobs] table, every field required and no unknown key, so that a typo in the TOML
+    is an error rather than a silent default."""
+
+    def typed(cls, table: dict, where: str):
+        names = {f.name: f for f in dataclasses.fields(cls)}
+        required = {n for n, f in names.items() if f.default is dataclasses.MISSING}
+        unknown, missing = set(table) - set(names), required - set(table)
+        if unknown or missing:
+            raise ValueError(f"{file}: [{where}] unknown keys {sorted(unknown)}, missing keys {sorted(missing)}")
+        return table
+
+    table = dict(typed(Knobs, spec.get("knobs", {}), "knobs"))
+    table["ppo"] = PPOSettings(**typed(PPOSettings, table["ppo"], "knobs.ppo"))
+    table["fidelity_gammas"] = tuple(float(g) for g in table["fidelity_gammas"])
+    for key in ("ddt_gamma", "leaf_mass", "match_tolerance", "actor_lr_scale"):
+        table[key] = float(table[key])
+    return Knobs(**table)

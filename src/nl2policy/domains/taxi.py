@@ -223,3 +223,35 @@ def optimal_policy(model: TaxiModel = TaxiModel()) -> tuple[float, dict[TaxiStat
 def expected_return(model: TaxiModel, policy: Callable[[np.ndarray], int]) -> float:
     """Exact expected fares per shift of a policy that sees only the features."""
     return _backward(model, lambda s: policy(s.features()))[0]
+
+
+class TaxiExact:
+    """Taxi's exact model as the domain's capability (``taxi.toml``'s ``exact_model``):
+    what ``Domain.exact`` returns, so policy code asks the domain instead of naming taxi."""
+
+    def __init__(self, model: TaxiModel = TaxiModel()) -> None:
+        self.model = model
+
+    def expected_return(self, act: Callable[[np.ndarray], int]) -> float:
+        return expected_return(self.model, act)
+
+    def optimum(self) -> float:
+        return optimal_policy(self.model)[0]
+
+    def expected_returns(self, acts: list[Callable[[np.ndarray], int]]) -> list[float]:
+        """``expected_return`` of many policies at once (``taxi_tables``: thousands a second)."""
+        tables = self.tables()
+        X = tables.features()
+        return [float(v) for v in tables.returns(np.array([[act(x) for x in X] for act in acts]).reshape(len(acts), -1))]
+
+    def expected_return_mixed(self, action_probs: Callable[[np.ndarray], np.ndarray]) -> float:
+        """Exact expected return of a stochastic policy (a soft DDT that samples its action):
+        ``action_probs`` maps a batch of feature vectors (n, 6) to probabilities (n, 4)."""
+        tables = self.tables()
+        return float(tables.mixed_returns(np.asarray(action_probs(tables.features()))[None])[0])
+
+    def tables(self):
+        """The model as arrays over feature states (``taxi_tables``), for exhaustive searches."""
+        from nl2policy.domains.taxi_tables import taxi_tables
+
+        return taxi_tables(self.model)

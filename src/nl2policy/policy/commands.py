@@ -13,6 +13,7 @@ def register(app: typer.Typer) -> None:
     app.command("optimize")(optimize)
     app.command("policy-experiment")(policy_experiment)
     app.command("policy-fidelity")(policy_fidelity)
+    app.command("ceilings")(ceilings)
 
 
 def optimize(
@@ -21,9 +22,10 @@ def optimize(
     steps: int = typer.Option(20_000, min=1, help="PPO env steps"),
     seed: int = typer.Option(0),
     out: Path = typer.Option(Path("runs/optimize"), help="Output folder; holding a checkpoint, the run resumes"),
-    eval_episodes: Optional[int] = typer.Option(None, min=1, help="Episodes for the before/after returns (default: taxi 200, highway 10)"),
+    eval_episodes: Optional[int] = typer.Option(None, min=1, help="Episodes for the before/after returns (default: the domain's eval_episodes, domains/<name>.toml)"),
+    polish: Optional[bool] = typer.Option(None, "--polish/--no-polish", help="Hill-climb the kept tree on the exact model (default: on where the domain has one, taxi)"),
 ) -> None:
-    """Improve a tree with PPO (tree -> DDT -> PPO -> tree); writes trees, curve and summary.json."""
+    """Improve a tree with PPO (tree -> DDT -> PPO -> tree), never returning a worse tree; writes trees, curve and summary.json."""
     import torch
 
     from nl2policy.cli import console, domain_or_fail, fail, progress_bar, tree_or_fail
@@ -36,16 +38,16 @@ def optimize(
     with progress_bar() as bar:
         task = bar.add_task(f"{domain}: PPO steps", total=steps)
         try:
-            summary = optimize_tree(domain, parsed, steps, seed, out, eval_episodes=eval_episodes,
+            summary = optimize_tree(domain, parsed, steps, seed, out, eval_episodes=eval_episodes, polish=polish,
                                     progress=lambda n, total: bar.update(task, completed=n))
         except ValueError as exc:
             fail(str(exc))
     console.print("[bold]before[/]\n" + to_text(parsed, d.vocab))
     final = json.loads((out / "final_tree.json").read_text())
     if summary["final_tree_has_raw_tests"]:
-        console.print("[bold]after[/] (has raw threshold tests)\n" + json.dumps(final, indent=2))
+        console.print(f"[bold]after[/] ({summary['returned']}; has raw threshold tests)\n" + json.dumps(final, indent=2))
     else:
-        console.print("[bold]after[/]\n" + to_text(parse_tree(final, d.vocab), d.vocab))
+        console.print(f"[bold]after[/] ({summary['returned']})\n" + to_text(parse_tree(final, d.vocab), d.vocab))
     print(json.dumps(summary))
 
 
@@ -112,3 +114,23 @@ def policy_fidelity(
         domain_or_fail(name)
     command = f"nl2policy policy-fidelity --states {states} --out {out}" + "".join(f" --domain {d}" for d in domain or [])
     console.print(write_fidelity(states, out, command, domains).read_text())
+
+
+def ceilings(
+    domain: str = typer.Option(..., help="A domain with an exact model (taxi)"),
+    max_depth: int = typer.Option(3, min=1, max=3, help="Deepest dictionary trees to search (the grid allows 3)"),
+    out: Path = typer.Option(Path("results/policy"), help="Folder for ceilings_<domain>.md / .json"),
+) -> None:
+    """The domain's yardsticks by exact search: optimum, best stationary feature policy, best trees."""
+    from nl2policy.cli import console, domain_or_fail, fail, progress_bar
+    from nl2policy.policy.ceilings_report import compute_ceilings, write_ceilings
+
+    domain_or_fail(domain)
+    command = f"nl2policy ceilings --domain {domain} --max-depth {max_depth} --out {out}"
+    with progress_bar() as bar:
+        task = bar.add_task(f"{domain}: ceilings", total=None)
+        try:
+            result = compute_ceilings(domain, max_depth, progress=lambda text: bar.update(task, description=text))
+        except ValueError as exc:
+            fail(str(exc))
+    console.print(write_ceilings(result, out, command).read_text())

@@ -5,25 +5,14 @@ Tree -> DDT (exact warm start). Every domain question is one linear test ``w . x
 exactly those ``w`` and ``c``; only the sharpness ``gamma`` is a choice. A leaf puts
 ``LEAF_MASS`` of its probability on the tree's action and spreads the rest evenly.
 
-How gamma and the leaf mass were chosen (measured agreement for several gammas:
-``results/policy/fidelity.md``, made by ``nl2policy policy-fidelity``):
-* ``LEAF_MASS``, per domain. Highway 0.95; taxi 0.7 since the tuning sweep
-  (``python -m nl2policy.policy.tuning``, results/policy/tuning_taxi.md): at 0.95 the other
-  actions get 1.7 % each, PPO almost never tries them, and in every 12k-step taxi run the
-  discretized tree came back unchanged; at 0.7 (10 % each) PPO finds better leaves. The
-  argmax bound below still holds with a wide margin on taxi (paths are >= 98 % sure).
-  Original reasoning for 0.95: the tree's action must dominate (the fresh DDT should *drive* like
-  the tree: its sampled actions are what PPO's first episodes score), yet leave PPO some
-  entropy to explore with (0.95 over 4-5 actions is ~0.25 nats). With mass m and A actions the
-  tree's action is the mixture's argmax whenever the right leaf's path probability exceeds
-  1 / (1 + m - (1-m)/(A-1)) ~ 0.52, i.e. each of at most 3 nodes on the path is at least
-  0.81 sure: |w.x - c| > 1.45 / gamma.
-* ``GAMMA``: taxi features are exactly 0/1 against thresholds 0.5, so every state is 0.5 from
-  every threshold and gamma = 10 makes each node 99.3 % sure (logit 5). Highway features are
-  continuous in [0, 1]; a state can sit anywhere near a threshold. Measured on 10,000 uniform
-  states, gamma = 100 still missed 0.13 % on the worst corpus tree, gamma = 300 misses at most
-  0.03 % (a node is then 99.3 % sure 0.017 = 1.7 m from its threshold). The price: only states
-  that close to a threshold move a node's test, so on highway PPO mostly refines the leaves.
+Gamma and the leaf mass are the domain's knobs (``Domain.knobs``, from ``domains/<name>.toml``,
+where each value's reason is written; measured agreement for several gammas:
+``results/policy/fidelity.md``, made by ``nl2policy policy-fidelity``). Why a leaf mass works:
+the tree's action must dominate (the fresh DDT should *drive* like the tree: its sampled actions
+are what PPO's first episodes score), yet leave PPO some entropy to explore with. With mass m
+and A actions the tree's action is the mixture's argmax whenever the right leaf's path
+probability exceeds 1 / (1 + m - (1-m)/(A-1)) (~0.52 at m = 0.95), i.e. each of at most 3
+nodes on the path is at least 0.81 sure: |w.x - c| > 1.45 / gamma.
 
 Optional padding to the full 4-level grid: each leaf above the bottom row becomes a complete
 subtree whose leaves all hold the same action. Its nodes test questions not yet asked on the
@@ -42,16 +31,10 @@ import numpy as np
 import torch
 
 from nl2policy.domains import get_domain
-from nl2policy.domains.spec import Domain
+from nl2policy.domains.spec import Domain, Knobs
 from nl2policy.policy.ddt import DDT, Shape
 from nl2policy.trees import MAX_DEPTH, Leaf, Node, Tree
 
-LEAF_MASS = {"taxi": 0.7, "highway": 0.95}
-GAMMA = {"taxi": 10.0, "highway": 300.0}
-# A learned threshold counts as a domain question when it is this close (in feature units) to
-# the question's threshold. Taxi features are 0/1, so any threshold strictly inside (0, 1) is
-# the same test as the question's 0.5.
-MATCH_TOLERANCE = {"taxi": 0.5, "highway": 0.05}
 RAW_PREFIX = "raw:"
 
 
@@ -95,15 +78,17 @@ def _shape_and_tests(tree: Tree) -> tuple[Shape, list[str], list[str]]:
 
 
 def tree_to_ddt(domain_name: str, tree: Tree, pad: bool = False, gamma: Optional[float] = None,
-                leaf_mass: Optional[float] = None) -> DDT:
-    """A DDT that acts like `tree` (exact weights and comparators from the domain spec)."""
+                knobs: Optional[Knobs] = None) -> DDT:
+    """A DDT that acts like `tree` (exact weights and comparators from the domain spec); the
+    sharpness and leaf mass from `knobs` (default: the domain's), `gamma` overriding."""
     domain = get_domain(domain_name)
-    leaf_mass = LEAF_MASS[domain_name] if leaf_mass is None else leaf_mass
+    knobs = knobs or domain.knobs
+    leaf_mass = knobs.leaf_mass
     if pad:
         tree = pad_tree(tree, domain)
     shape, questions, actions = _shape_and_tests(tree)
     n_actions = len(domain.actions)
-    ddt = DDT(shape, len(domain.features), n_actions, GAMMA[domain_name] if gamma is None else gamma)
+    ddt = DDT(shape, len(domain.features), n_actions, knobs.ddt_gamma if gamma is None else gamma)
     rows = [domain.questions.index(q) for q in questions]
     other = math.log((1.0 - leaf_mass) / (n_actions - 1))
     logits = torch.full((shape.leaves, n_actions), other)
@@ -137,7 +122,7 @@ def ddt_to_tree(domain_name: str, ddt: DDT, tolerance: Optional[float] = None) -
     whose two branches came out identical. Each prune keeps the action in every state the world
     can produce (Domain.possible_answer_sets)."""
     domain = get_domain(domain_name)
-    tol = MATCH_TOLERANCE[domain_name] if tolerance is None else tolerance
+    tol = domain.knobs.match_tolerance if tolerance is None else tolerance
     candidates = _single_feature_questions(domain)
     w = ddt.weights.detach().cpu().numpy().astype(np.float64)
     c = ddt.comparators.detach().cpu().numpy().astype(np.float64)

@@ -15,6 +15,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from nl2policy.domains import get_domain
 from nl2policy.language.corpus import load_corpus
 from nl2policy.policy.rollout import Evaluation, evaluate, random_policy, tree_policy
 from nl2policy.trees import Tree, tree_to_json
@@ -62,12 +63,11 @@ def corpus_returns(domain: str, screen_episodes: int, episodes: int, seed: int, 
         evals = list(pool.map(_evaluate_tree, [(domain, t, episodes, fresh) for t in picks.values()]))
     for (name, tree), ev in zip(picks.items(), evals):
         rows.append(_row(name, ev, tree_to_json(tree)))
-    if domain == "taxi":
-        from nl2policy.domains.taxi import TaxiModel, expected_return, optimal_policy
-
-        rows.append(Row("optimal (value iteration, exact)", optimal_policy(TaxiModel())[0], 0.0, 0))
+    exact = get_domain(domain).exact
+    if exact is not None:
+        rows.append(Row("optimal (value iteration, exact)", exact.optimum(), 0.0, 0))
         best = picks["best corpus tree"]
-        rows.append(Row("best corpus tree (exact)", expected_return(TaxiModel(), tree_policy("taxi", best)), 0.0, 0))
+        rows.append(Row("best corpus tree (exact)", exact.expected_return(tree_policy(domain, best)), 0.0, 0))
     return rows
 
 

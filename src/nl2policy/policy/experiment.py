@@ -3,7 +3,7 @@
 Protocol: the `candidates` most frequent distinct corpus trees are ranked by the tree's own
 mean return (`select_episodes` episodes); the best `best` are the tree-DDT starts, each trained
 with `tree_seeds` seeds; each baseline gets `baseline_seeds` seeds. Metric: rolling mean of
-training episode reward (window ``WINDOW[domain]``): *initial* = the mean of the first window,
+training episode reward (window ``Knobs.rolling_window``): *initial* = the mean of the first window,
 *best* = the highest rolling mean over the run once a full window exists. Reported: median and
 standard error (std / sqrt(runs)) across runs. Every run has its own folder with a
 checkpoint and, when done, ``result.json``; a restarted experiment skips finished runs and
@@ -21,15 +21,12 @@ import numpy as np
 
 from nl2policy.language.corpus import load_corpus
 from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn
-from nl2policy.policy.optimize import (EVAL_SEED, WINDOW, checkpoint_tree_score, rolling_mean, train_checkpointed,
-                                       write_curve)
+from nl2policy.policy.optimize import EVAL_SEED, checkpoint_tree_score, rolling_mean, train_checkpointed, write_curve
 from nl2policy.policy.rollout import evaluate, tree_policy
 from nl2policy.policy.sb3_policy import METHODS, actor_ddt, make_ppo, soft_act_fn
 from nl2policy.trees import parse_tree, tree_to_json
 from nl2policy.domains import get_domain
 
-# Episodes for the discretization check of each tree-DDT run (highway: 5, for the budget).
-EVAL_EPISODES = {"taxi": 200, "highway": 5}
 LABEL = {"tree_ddt": "tree-initialized DDT", "random_ddt": "random DDT (8 leaves)", "mlp": "MLP (3 layers)"}
 
 
@@ -52,32 +49,25 @@ def distinct_policies(domain: str) -> list[tuple[dict, int]]:
     return [(tree_to_json(tree), count) for tree, count in groups]
 
 
-def exact_taxi_return(act_fn) -> float:
-    """Exact expected fares per shift of a feature-based policy (taxi only; no sampling noise)."""
-    from nl2policy.domains.taxi import TaxiModel, expected_return
-
-    return expected_return(TaxiModel(), act_fn)
-
-
 def select_trees(domain: str, candidates: int, best: int, episodes: int, seed: int, out: Path) -> list[dict]:
     """The `best` of the `candidates` most frequent distinct corpus policies, ranked by mean
-    return over `episodes` episodes (taxi: by the exact expected return). Cached in out."""
+    return over `episodes` episodes (with an exact model, taxi: by the exact expected return). Cached in out."""
     path = out / "selected_trees.json"
     if path.is_file():
         return json.loads(path.read_text())["selected"]
-    vocab = get_domain(domain).vocab
+    vocab, exact = get_domain(domain).vocab, get_domain(domain).exact
     ranked = []
     for tree_json, count in distinct_policies(domain)[:candidates]:
         tree = parse_tree(tree_json, vocab)
         ev = evaluate(domain, tree_policy(domain, tree), episodes, seed)
         entry = {"tree": tree_json, "count": count, "mean_return": ev.mean_return, "stderr": ev.stderr}
-        if domain == "taxi":
-            entry["exact_return"] = exact_taxi_return(tree_act_fn(domain, tree))
+        if exact is not None:
+            entry["exact_return"] = exact.expected_return(tree_act_fn(domain, tree))
         ranked.append(entry)
     ranked.sort(key=lambda r: -r.get("exact_return", r["mean_return"]))
     out.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps({"episodes": episodes, "seed": seed, "grouped_by": "distinct policy (Domain.same_policy)",
-                                "ranked_by": "exact_return" if domain == "taxi" else "mean_return",
+                                "ranked_by": "exact_return" if exact is not None else "mean_return",
                                 "candidates": ranked, "selected": ranked[:best]}, indent=2))
     return ranked[:best]
 
@@ -87,11 +77,12 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
     result_path = run_dir / "result.json"
     if result_path.is_file():
         return json.loads(result_path.read_text())
-    tree = parse_tree(tree_json, get_domain(domain).vocab) if tree_json else None
+    d = get_domain(domain)
+    tree = parse_tree(tree_json, d.vocab) if tree_json else None
     score = checkpoint_tree_score(domain) if method != "mlp" else None
     model, episodes, seconds, best = train_checkpointed(lambda: make_ppo(domain, method, seed, tree), domain, seed,
                                                         steps, run_dir, progress, score)
-    window = WINDOW[domain]
+    window = d.knobs.rolling_window
     write_curve(episodes, window, run_dir, f"{domain}: {LABEL[method]} seed {seed}")
     rolling = rolling_mean([r for _, r in episodes], window)
     full = rolling[window - 1:] if len(rolling) >= window else rolling[-1:]
@@ -99,17 +90,17 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
               "seconds": seconds, "episodes": len(episodes), "window": window, "tree": tree_json,
               "initial": float(full[0]), "best": float(full.max()), "final": float(rolling[-1]),
               "curve": [[s, float(m)] for (s, _), m in zip(episodes, rolling)]}
-    if domain == "taxi":  # what the user gets back, judged exactly: the discretized tree (greedy MLP)
+    if d.exact is not None:  # what the user gets back, judged exactly: the discretized tree (greedy MLP)
         final_act = (tree_act_fn(domain, ddt_to_tree(domain, actor_ddt(model))) if method != "mlp"
                      else soft_act_fn(model, deterministic=True))
-        result["exact_final"] = exact_taxi_return(final_act)
+        result["exact_final"] = d.exact.expected_return(final_act)
         if tree is not None:
-            result["exact_initial_tree"] = exact_taxi_return(tree_act_fn(domain, tree))
+            result["exact_initial_tree"] = d.exact.expected_return(tree_act_fn(domain, tree))
         if best is not None:  # the best discretized tree over the run's checkpoints (exact score)
             result.update({"exact_best_tree": best["score"], "best_tree_step": best["step"], "best_tree": best["tree"]})
     if method == "tree_ddt":  # how far is the discretized tree from the soft DDT it came from?
         final_tree = ddt_to_tree(domain, actor_ddt(model))
-        n = EVAL_EPISODES[domain]
+        n = d.knobs.eval_episodes
         result.update({
             "final_tree": tree_to_json(final_tree), "final_tree_has_raw_tests": has_raw_tests(final_tree),
             "eval_episodes": n,
@@ -159,10 +150,9 @@ def summarize(results: list[dict], domain: str) -> dict:
             entry["discretized_minus_soft"] = {"mean": float(np.mean(gaps)), "values": gaps}
             entry["raw_test_trees"] = sum(r["final_tree_has_raw_tests"] for r in rows)
         table[method] = entry
-    if domain == "taxi":
-        from nl2policy.domains.taxi import TaxiModel, optimal_policy
-
-        optimum = optimal_policy(TaxiModel())[0]
+    exact = get_domain(domain).exact
+    if exact is not None:
+        optimum = exact.optimum()
         for entry in table.values():
             for key in ("initial", "best", "final", "exact_final", "exact_best_tree"):
                 if key in entry:

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nl2policy.domains import get_domain
 from nl2policy.policy.experiment import LABEL
 from nl2policy.policy.sb3_policy import METHODS
 from nl2policy.report import provenance
@@ -16,7 +17,7 @@ from nl2policy.report import provenance
 def write_table(domain: str, table: dict, results: list[dict], settings: dict, out: Path, command: str) -> Path:
     meta = provenance(command)
     window = results[0]["window"]
-    taxi = domain == "taxi"
+    taxi = get_domain(domain).exact is not None  # exact columns where the domain has an exact model
     lines = [f"# Table 2 ({domain}): PPO from a tree-initialized DDT vs baselines", "",
              f"Made by: `{command}`  ", f"On: {meta['made']}  ",
              f"Settings: {json.dumps(settings)}  ",

@@ -34,11 +34,7 @@ def env_states(domain: str, n: int, seed: int = 0) -> np.ndarray:
 
 
 def uniform_states(domain: str, n: int, seed: int = 0) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    if domain == "taxi":  # one-hot place, three free bits
-        place = np.eye(3)[rng.integers(3, size=n)]
-        return np.hstack([place, rng.integers(2, size=(n, 3))]).astype(np.float32)
-    return rng.uniform(0.0, 1.0, size=(n, len(get_domain(domain).features))).astype(np.float32)
+    return get_domain(domain).uniform_states(n, seed)
 
 
 def tree_actions_batch(domain: str, tree: Tree, states: np.ndarray) -> np.ndarray:

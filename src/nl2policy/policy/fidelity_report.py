@@ -7,23 +7,21 @@ from pathlib import Path
 
 import numpy as np
 
-from nl2policy.domains import DOMAINS
-from nl2policy.policy.convert import GAMMA, LEAF_MASS
+from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.policy.corpus_returns import distinct_trees
 from nl2policy.policy.fidelity import agreement, env_states, round_trips, uniform_states
 from nl2policy.report import provenance
-
-OTHER_GAMMAS = {"taxi": (2.0, 5.0), "highway": (30.0, 100.0)}  # for the sensitivity column
 
 
 def write_fidelity(states: int, out: Path, command: str, domains: tuple[str, ...] = DOMAINS) -> Path:
     """Writes fidelity.md/.json for all domains, or fidelity_<domains>.md/.json for a subset
     (so re-checking one domain after changing its settings leaves the other's record alone)."""
     meta = provenance(command)
-    report: dict = {"meta": meta, "states": states, "leaf_mass": LEAF_MASS, "domains": {}}
+    leaf_mass = {domain: get_domain(domain).knobs.leaf_mass for domain in DOMAINS}
+    report: dict = {"meta": meta, "states": states, "leaf_mass": leaf_mass, "domains": {}}
     lines = ["# Fidelity of the fresh (tree-initialized) DDT", "", f"Made by: `{command}`  ", f"On: {meta['made']}", "",
              f"Agreement = fraction of {states} sampled states on which the DDT's most likely action is the tree's "
-             f"action; min and mean over every distinct corpus tree. Leaf mass (per domain): {json.dumps(LEAF_MASS)}. "
+             f"action; min and mean over every distinct corpus tree. Leaf mass (per domain): {json.dumps(leaf_mass)}. "
              "Env states: rolled with random actions (seed 0); uniform: see `policy/fidelity.py`.", "",
              "| domain | trees | gamma | states | padded | min agreement | mean agreement | trees below 99.9 % |",
              "|---|---:|---:|---|---|---:|---:|---:|"]
@@ -31,17 +29,18 @@ def write_fidelity(states: int, out: Path, command: str, domains: tuple[str, ...
         trees = distinct_trees(domain)
         samples = {"env": env_states(domain, states, seed=0), "uniform": uniform_states(domain, states, seed=0)}
         rows = []
-        for gamma in (GAMMA[domain], *OTHER_GAMMAS[domain]):
+        used = get_domain(domain).knobs.ddt_gamma
+        for gamma in (used, *get_domain(domain).knobs.fidelity_gammas):
             for kind, X in samples.items():
-                for pad in ((False, True) if gamma == GAMMA[domain] else (False,)):
+                for pad in ((False, True) if gamma == used else (False,)):
                     values = np.array([agreement(domain, t, X, pad=pad, gamma=gamma) for t in trees])
                     rows.append({"gamma": gamma, "states": kind, "padded": pad, "min": float(values.min()),
                                  "mean": float(values.mean()), "below_999": int((values < 0.999).sum())})
-                    lines.append(f"| {domain} | {len(trees)} | {gamma:g}{' (used)' if gamma == GAMMA[domain] else ''} | {kind} | "
+                    lines.append(f"| {domain} | {len(trees)} | {gamma:g}{' (used)' if gamma == used else ''} | {kind} | "
                                  f"{'yes' if pad else 'no'} | {values.min():.4f} | {values.mean():.5f} | {rows[-1]['below_999']} |")
         trips = sum(round_trips(domain, t) for t in trees)
         trips_padded = sum(round_trips(domain, t, pad=True) for t in trees)
-        report["domains"][domain] = {"trees": len(trees), "gamma": GAMMA[domain], "rows": rows,
+        report["domains"][domain] = {"trees": len(trees), "gamma": used, "rows": rows,
                                      "round_trips": trips, "round_trips_padded": trips_padded}
     lines += ["", "Discretizing the fresh DDT gives back the same tree (structural equality):", ""]
     for domain, r in report["domains"].items():

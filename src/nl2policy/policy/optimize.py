@@ -3,6 +3,13 @@
 The training loop is in plain view in ``train_checkpointed``: learn one chunk of steps, save
 the SB3 model, the step count and the episode curve so far, repeat. A killed run started
 again with the same ``out`` folder loads the checkpoint and continues from the saved step.
+
+What ``optimize_tree`` returns (``final_tree.json``) is never worse than the tree it was
+given: the best of the initial tree and every checkpoint's discretized tree (``keep_best``),
+then, with an exact model and ``polish``, a hill climb over questions and actions from it
+(``polish``). PPO's own last tree (``last_tree.json``), the kept tree (``best_tree.json``) and
+the polished one (``polished_tree.json``) are written and scored beside it, so the paper's
+DDT + PPO and each added step are reported separately.
 """
 
 from __future__ import annotations
@@ -18,13 +25,16 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
+from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn
+from nl2policy.policy.keep_best import keep_best, tree_scorer
 from nl2policy.policy.rollout import evaluate, tree_policy
-from nl2policy.policy.sb3_policy import PPO_SETTINGS, TreePPO, actor_ddt, make_ppo, make_vec_env, soft_act_fn
+from nl2policy.policy.sb3_policy import TreePPO, action_probs_fn, actor_ddt, make_ppo, make_vec_env, soft_act_fn
 from nl2policy.trees import Tree, tree_to_json
 
-WINDOW = {"taxi": 100, "highway": 20}  # episodes in the rolling mean of training reward
-EVAL_EPISODES = {"taxi": 200, "highway": 10}
+# Each domain's rolling window (Knobs.rolling_window), by name, for app/runs.py, which reads it
+# from here; everything in this package reads the knobs.
+WINDOW = {name: get_domain(name).knobs.rolling_window for name in DOMAINS}
 EVAL_SEED = 50_000  # evaluation episodes use seeds far from the training env's
 CHECKPOINT = "checkpoint.zip"
 STATE = "state.json"
@@ -48,21 +58,24 @@ class EpisodeLog(BaseCallback):
         return True
 
 
-def checkpoint_tree_score(domain: str) -> Optional[Callable[[PPO], tuple[dict, float]]]:
-    """How to score the discretized tree at each checkpoint, or None where that is too dear.
+def checkpoint_tree_score(domain: str, sampled: bool = False,
+                          scorer: Optional[Callable[[Tree], float]] = None) -> Optional[Callable[[PPO], tuple[dict, float]]]:
+    """How to score the discretized tree at each checkpoint (``keep_best.tree_scorer``), or None.
 
-    Taxi: the exact expected return of the discretized tree (``domains.taxi.expected_return``,
-    ~0.1 s, no sampling noise). PPO's discretized tree wanders between checkpoints (measured:
+    With an exact model (taxi): the exact expected return of the discretized tree (~0.1 s, no
+    sampling noise). PPO's discretized tree wanders between checkpoints (measured:
     results/policy/tuning_taxi.md), so the run also keeps the best tree it passed through,
-    the way one keeps the best checkpoint on a validation score. Highway has no exact model
-    and sampled episodes cost seconds each, so nothing is tracked there."""
-    if domain != "taxi":
+    the way one keeps the best checkpoint on a validation score. Without one (highway),
+    sampled episodes cost seconds each: only where `sampled` asks for it (``optimize`` does,
+    to return a tree never worse than its start; the Table 2 grid does not). `scorer`: one
+    already made, to share its cache of sampled scores."""
+    if get_domain(domain).exact is None and not sampled:
         return None
-    from nl2policy.domains.taxi import TaxiModel, expected_return
+    scorer = scorer or tree_scorer(domain)[0]
 
     def score(model: PPO) -> tuple[dict, float]:
         tree = ddt_to_tree(domain, actor_ddt(model))
-        return tree_to_json(tree), expected_return(TaxiModel(), tree_act_fn(domain, tree))
+        return tree_to_json(tree), scorer(tree)
 
     return score
 
@@ -86,13 +99,16 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
         model = TreePPO.load(ckpt_path, env=make_vec_env(domain, seed + 1000 * (state["chunks"] + 1)), device="cpu")
         episodes, seconds, chunks = [tuple(e) for e in state["episodes"]], state["seconds"], state["chunks"]
         best = state.get("best_tree")
+        if best is None and score_tree is not None:  # a checkpoint from before its run tracked trees
+            tree_json, score = score_tree(model)
+            best = {"step": int(model.num_timesteps), "tree": tree_json, "score": score}
     else:
         model, episodes, seconds, chunks = model_factory(), [], 0.0, 0
         best = None
         if score_tree is not None:
             tree_json, score = score_tree(model)
             best = {"step": 0, "tree": tree_json, "score": score}
-    rollout = PPO_SETTINGS[domain]["n_steps"]
+    rollout = model.n_steps
     chunk = rollout * max(1, steps // (10 * rollout))  # about ten checkpoints per run
     log = EpisodeLog(episodes, steps, progress)
     while model.num_timesteps < steps:
@@ -150,42 +166,74 @@ def write_curve(episodes: list, window: int, out: Path, title: str) -> None:
 
 
 def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, progress: Progress = None,
-                  eval_episodes: Optional[int] = None) -> dict:
-    """PPO from the tree-initialized DDT; writes initial_tree.json, final_tree.json, curve.csv,
+                  eval_episodes: Optional[int] = None, polish: Optional[bool] = None) -> dict:
+    """PPO from the tree-initialized DDT, then keep-best and (`polish`, default: where the
+    domain has an exact model) the polish; writes initial_tree.json, last_tree.json,
+    best_tree.json, [polished_tree.json,] final_tree.json (what is returned), curve.csv,
     curve.png and summary.json into `out` and returns the summary (see module doc)."""
+    d = get_domain(domain)
+    polish = d.exact is not None if polish is None else polish
+    if polish and d.exact is None:
+        raise ValueError(f"--polish needs an exact model; {domain} has none")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tree_path = out / "initial_tree.json"
     if (out / STATE).is_file() and tree_path.is_file() and json.loads(tree_path.read_text()) != tree_to_json(tree):
         raise ValueError(f"{out} holds a checkpoint of a run from a different tree; choose another --out")
     tree_path.write_text(json.dumps(tree_to_json(tree), indent=2))
-    model, episodes, seconds, best = train_checkpointed(lambda: make_ppo(domain, "tree_ddt", seed, tree), domain,
-                                                        seed, steps, out, progress, checkpoint_tree_score(domain))
-    final_tree = ddt_to_tree(domain, actor_ddt(model))
+    scorer, rule = tree_scorer(domain)
+    model, episodes, seconds, best = train_checkpointed(lambda: make_ppo(domain, "tree_ddt", seed, tree), domain, seed,
+                                                        steps, out, progress, checkpoint_tree_score(domain, True, scorer))
+    last_tree = ddt_to_tree(domain, actor_ddt(model))
+    (out / "last_tree.json").write_text(json.dumps(tree_to_json(last_tree), indent=2))
+    start = time.perf_counter()
+    initial_score = scorer(tree)
+    kept, kept_score, kept_from = keep_best(tree, initial_score, best)
+    (out / "best_tree.json").write_text(json.dumps(tree_to_json(kept), indent=2))
+    select_seconds = time.perf_counter() - start
+    final_tree, returned = kept, f"kept {kept_from}"
+    polished = None
+    if polish and not has_raw_tests(kept):
+        from nl2policy.policy.polish import polish as hill_climb
+
+        polished = hill_climb(domain, kept)
+        (out / "polished_tree.json").write_text(json.dumps(tree_to_json(polished.tree), indent=2))
+        if polished.value > kept_score:
+            final_tree, returned = polished.tree, "polished"
     (out / "final_tree.json").write_text(json.dumps(tree_to_json(final_tree), indent=2))
-    if best is not None:
-        (out / "best_tree.json").write_text(json.dumps(best["tree"], indent=2))
-    window = WINDOW[domain]
+    knobs = d.knobs
+    window = knobs.rolling_window
     write_curve(episodes, window, out, f"{domain}: PPO from the tree-initialized DDT (seed {seed})")
-    n = eval_episodes or EVAL_EPISODES[domain]
+    n = eval_episodes or knobs.eval_episodes
     rolling = rolling_mean([r for _, r in episodes], window)
     summary = {
         "domain": domain, "seed": seed, "steps": int(model.num_timesteps), "seconds": round(seconds, 2),
-        "eval_episodes": n, "eval_seed": EVAL_SEED,
+        "eval_episodes": n, "eval_seed": EVAL_SEED, "returned": returned,
         "initial_mean_return": evaluate(domain, tree_policy(domain, tree), n, EVAL_SEED).mean_return,
         "final_mean_return": evaluate(domain, tree_act_fn(domain, final_tree), n, EVAL_SEED).mean_return,
+        "last_tree_mean_return": evaluate(domain, tree_act_fn(domain, last_tree), n, EVAL_SEED).mean_return,
         "final_soft_ddt_return": evaluate(domain, soft_act_fn(model, deterministic=False), n, EVAL_SEED).mean_return,
         "final_tree_has_raw_tests": has_raw_tests(final_tree),
         "training_episodes": len(episodes), "rolling_window": window,
         "first_rolling_return": float(rolling[min(window, len(rolling)) - 1]) if len(rolling) else None,
         "last_rolling_return": float(rolling[-1]) if len(rolling) else None,
+        "keep_best": {"scored_by": rule, "initial_score": initial_score, "best_checkpoint_score": best["score"],
+                      "best_checkpoint_step": best["step"], "kept": kept_from, "kept_score": kept_score,
+                      "seconds": round(select_seconds, 2)},
     }
-    summary["discretization_gap"] = summary["final_mean_return"] - summary["final_soft_ddt_return"]
-    if best is not None:  # taxi: exact expected returns of the initial, final and best-checkpoint trees
-        from nl2policy.domains.taxi import TaxiModel, expected_return
-
-        summary["exact_initial_tree"] = expected_return(TaxiModel(), tree_act_fn(domain, tree))
-        summary["exact_final_tree"] = expected_return(TaxiModel(), tree_act_fn(domain, final_tree))
-        summary["exact_best_tree"], summary["best_tree_step"] = best["score"], best["step"]
+    # PPO's own discretization loss: its last discretized tree against the soft DDT it came from
+    summary["discretization_gap"] = summary["last_tree_mean_return"] - summary["final_soft_ddt_return"]
+    if polished is not None:
+        summary["polish"] = {"start_score": polished.start_value, "score": polished.value, "rounds": polished.rounds,
+                             "candidates_scored": polished.candidates_scored, "seconds": round(polished.seconds, 2)}
+    if d.exact is not None:  # exact expected returns of every tree above
+        summary["exact_initial_tree"] = initial_score
+        summary["exact_last_tree"] = float(d.exact.expected_return(tree_act_fn(domain, last_tree)))
+        summary["exact_soft_ddt"] = d.exact.expected_return_mixed(action_probs_fn(model))
+        summary["exact_discretization_gap"] = summary["exact_last_tree"] - summary["exact_soft_ddt"]
+        summary["exact_best_tree"], summary["best_tree_step"] = kept_score, best["step"] if kept_from == "checkpoint" else 0
+        if polished is not None:
+            summary["exact_polished_tree"] = polished.value
+        summary["exact_final_tree"] = float(d.exact.expected_return(tree_act_fn(domain, final_tree)))
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary

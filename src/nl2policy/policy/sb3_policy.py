@@ -4,6 +4,9 @@
 raw six features (an empty ``pi`` MLP) and the DDT maps them to log mixture probabilities,
 which SB3's ``CategoricalDistribution`` takes as logits. The critic stays a small MLP
 (64-64), so value learning does not disturb the tree. Every method sees the same features.
+
+PPO's settings and the actor's learning-rate scale are the domain's knobs (``Domain.knobs``,
+``domains/<name>.toml``, with their reasons); ``make_ppo`` takes other knobs for experiments.
 """
 
 from __future__ import annotations
@@ -18,30 +21,13 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from nl2policy.domains import get_domain, make_env
-from nl2policy.policy.convert import GAMMA, tree_to_ddt
+from nl2policy.domains.spec import Knobs
+from nl2policy.policy.convert import tree_to_ddt
 from nl2policy.policy.ddt import DDT, random_ddt
 from nl2policy.trees import Tree
 
 METHODS = ("tree_ddt", "random_ddt", "mlp")
 CRITIC = [64, 64]
-# Per-domain PPO settings, the same for all three methods (taxi's entropy bonus 0.01 came with
-# the tuning of results/policy/tuning_taxi.md). Highway rollouts are short (256)
-# because a highway run only gets a few thousand steps; gamma 0.9 as in highway-env's examples.
-PPO_SETTINGS = {
-    "taxi": dict(n_steps=512, batch_size=64, n_epochs=10, gamma=0.99, learning_rate=3e-4, ent_coef=0.01),
-    "highway": dict(n_steps=256, batch_size=64, n_epochs=10, gamma=0.9, learning_rate=3e-4),
-}
-
-
-# The DDT actor's learning rate as a multiple of PPO's (the critic keeps PPO's). A tree-
-# initialized DDT starts at a sharp, confident optimum of its own parametrization: at
-# PPO's 3e-4 its leaf logits and comparators hardly move in a run (measured: the
-# discretized taxi trees never changed in 12k steps). See results/policy/tuning_taxi.md.
-# Taxi: x33 (~1e-2) with a small entropy bonus (PPO_SETTINGS) and leaf mass 0.7; highway is
-# unchanged (its grid was not rerun with other settings).
-ACTOR_LR_SCALE = {"taxi": 33.0, "highway": 1.0}
-
-
 class TreePPO(PPO):
     """SB3 PPO that honours a per-parameter-group ``lr_scale`` (SB3 itself sets every group's
     learning rate to the schedule's value before each update)."""
@@ -92,28 +78,33 @@ def make_vec_env(domain: str, seed: int) -> DummyVecEnv:
     return DummyVecEnv([build])
 
 
-def initial_actor(domain: str, method: str, seed: int, tree: Optional[Tree] = None) -> Optional[DDT]:
+def initial_actor(domain: str, method: str, seed: int, tree: Optional[Tree] = None,
+                  knobs: Optional[Knobs] = None) -> Optional[DDT]:
     """The DDT a method starts from (None for the MLP)."""
     d = get_domain(domain)
+    knobs = knobs or d.knobs
     if method == "tree_ddt":
         if tree is None:
             raise ValueError("tree_ddt needs a tree")
-        return tree_to_ddt(domain, tree, pad=True)
+        return tree_to_ddt(domain, tree, pad=True, knobs=knobs)
     if method == "random_ddt":
-        return random_ddt(len(d.features), len(d.actions), GAMMA[domain], depth=3, seed=seed)
+        return random_ddt(len(d.features), len(d.actions), knobs.ddt_gamma, depth=3, seed=seed)
     if method == "mlp":
         return None
     raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
 
 
-def make_ppo(domain: str, method: str, seed: int, tree: Optional[Tree] = None, env=None) -> PPO:
+def make_ppo(domain: str, method: str, seed: int, tree: Optional[Tree] = None, env=None,
+             knobs: Optional[Knobs] = None) -> PPO:
+    """PPO for `method` with the domain's knobs, or `knobs` where an experiment varies them."""
     env = env or make_vec_env(domain, seed)
-    settings = PPO_SETTINGS[domain]
-    actor = initial_actor(domain, method, seed, tree)
+    knobs = knobs or get_domain(domain).knobs
+    settings = knobs.ppo.as_kwargs()
+    actor = initial_actor(domain, method, seed, tree, knobs)
     if actor is None:  # 3 fully connected layers in the actor: 64, 64, action head
         return TreePPO("MlpPolicy", env, policy_kwargs=dict(net_arch=dict(pi=[64, 64], vf=CRITIC)),
                        seed=seed, device="cpu", verbose=0, **settings)
-    kwargs = dict(ddt=actor, actor_lr_scale=ACTOR_LR_SCALE[domain])
+    kwargs = dict(ddt=actor, actor_lr_scale=knobs.actor_lr_scale)
     return TreePPO(DDTPolicy, env, policy_kwargs=kwargs, seed=seed, device="cpu", verbose=0, **settings)
 
 
@@ -129,3 +120,16 @@ def soft_act_fn(model: PPO, deterministic: bool):
 
     return act
 
+
+
+def action_probs_fn(model: PPO):
+    """The trained policy's action probabilities for a batch of feature vectors (n, features):
+    what it samples from when it acts stochastically."""
+    import torch
+
+    def probs(X):
+        with torch.no_grad():
+            obs = torch.as_tensor(X, dtype=torch.float32, device=model.policy.device)
+            return model.policy.get_distribution(obs).distribution.probs.cpu().numpy()
+
+    return probs

@@ -10,6 +10,7 @@ tree's exact expected return (``domains.taxi.expected_return``) recorded. Writes
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -17,9 +18,10 @@ from pathlib import Path
 import torch
 
 from nl2policy.domains import get_domain
+from nl2policy.domains.spec import Knobs
 from nl2policy.domains.taxi import TaxiModel, expected_return, optimal_policy
-from nl2policy.policy import convert, sb3_policy
 from nl2policy.policy.convert import ddt_to_tree, tree_act_fn
+from nl2policy.policy.sb3_policy import make_ppo
 from nl2policy.report import provenance
 from nl2policy.trees import parse_tree
 
@@ -33,25 +35,25 @@ TREES = {  # exact returns 7.94 / 6.206 / 4.867; the 1st, 2nd and 14th most freq
              "no": {"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_village"}}},
 }
 # The settings before this sweep (PPO's 3e-4 for the tree, leaf mass 0.95, no entropy bonus)
-# and the ones now in sb3_policy / convert.
+# and the ones now in taxi.toml's knobs.
 VARIANTS = {
     "old: lr x1, mass 0.95, ent 0": dict(scale=1.0, mass=0.95, ent_coef=0.0),
     "new: lr x33, mass 0.7, ent 0.01": dict(scale=33.0, mass=0.7, ent_coef=0.01),
 }
 
 
+def variant_knobs(variant: dict) -> Knobs:
+    """Taxi's knobs with the variant's leaf mass, actor lr scale and entropy bonus."""
+    knobs = get_domain("taxi").knobs
+    return dataclasses.replace(knobs, leaf_mass=variant["mass"], actor_lr_scale=variant["scale"],
+                               ppo=dataclasses.replace(knobs.ppo, ent_coef=variant["ent_coef"]))
+
+
 def run(variant: dict, tree_json: dict, seed: int, steps: int) -> dict:
     """One PPO run under `variant`; the exact return of the discretized tree after every chunk."""
     model_ = TaxiModel()
     tree = parse_tree(tree_json, get_domain("taxi").vocab)
-    saved = (dict(convert.LEAF_MASS), dict(sb3_policy.ACTOR_LR_SCALE), dict(sb3_policy.PPO_SETTINGS["taxi"]))
-    convert.LEAF_MASS["taxi"], sb3_policy.ACTOR_LR_SCALE["taxi"] = variant["mass"], variant["scale"]
-    sb3_policy.PPO_SETTINGS["taxi"]["ent_coef"] = variant["ent_coef"]
-    try:
-        model = sb3_policy.make_ppo("taxi", "tree_ddt", seed, tree)
-    finally:
-        convert.LEAF_MASS.update(saved[0]); sb3_policy.ACTOR_LR_SCALE.update(saved[1])
-        sb3_policy.PPO_SETTINGS["taxi"].clear(); sb3_policy.PPO_SETTINGS["taxi"].update(saved[2])
+    model = make_ppo("taxi", "tree_ddt", seed, tree, knobs=variant_knobs(variant))
     start, trajectory = time.perf_counter(), []
     while model.num_timesteps < steps:
         model.learn(CHUNK, reset_num_timesteps=False)
@@ -81,7 +83,7 @@ def main() -> None:
     lines = ["# Does PPO change the tree? (taxi, exact returns of the discretized tree)", "",
              f"Made by: `{command}`  ", f"On: {meta['made']}  ",
              f"Discretized after every {CHUNK} steps; exact expected return (`domains.taxi.expected_return`). "
-             f"Optimum {optimum:.3f}. Other PPO settings: `PPO_SETTINGS['taxi']`.", "",
+             f"Optimum {optimum:.3f}. Other PPO settings: taxi.toml's `[knobs.ppo]`.", "",
              "| variant | tree | seed | initial tree | final tree | best checkpoint tree | trajectory |",
              "|---|---|---:|---:|---:|---:|---|"]
     for r in rows:
