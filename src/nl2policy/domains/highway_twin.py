@@ -99,6 +99,8 @@ class TwinConfig:
         if not cfg["normalize_reward"] or cfg["lane_change_reward"] or cfg["offroad_terminal"]:
             raise ValueError("the twin implements the normalized reward without lane-change reward or "
                              "off-road termination")
+        if IDMVehicle.POLITENESS:
+            raise ValueError("the twin implements MOBIL with politeness 0, highway-env's IDMVehicle default")
         if cfg["controlled_vehicles"] != 1 or cfg["initial_lane_id"] is not None:
             raise ValueError("the twin implements one controlled car in a random lane")
         return cls(
@@ -373,8 +375,6 @@ class HighwayTwin:
             safe = follower_a >= -IDM.LANE_CHANGE_MAX_BRAKING_IMPOSED
             # Do I gain enough (politeness 0: only my own acceleration counts)?
             gain = follow[lane, rows, me] - self_a
-            if IDM.POLITENESS:
-                raise NotImplementedError("the twin implements MOBIL with politeness 0, as highway-env's IDMVehicle")
             new_target = np.where(valid & safe & (gain >= IDM.LANE_CHANGE_MIN_ACC_GAIN), lane, new_target)
         self.target_lane = new_target
 
@@ -387,8 +387,7 @@ class HighwayTwin:
         heading_ref = np.clip(heading_command, -np.pi / 4, np.pi / 4)
         heading_rate = KP_HEADING * _wrap_to_pi(heading_ref - self.heading)
         slip = np.arcsin(np.clip(LENGTH / 2 / _not_zero(self.speed) * heading_rate, -1, 1))
-        steering = np.clip(np.arctan(2 * np.tan(slip)), -MAX_STEERING, MAX_STEERING)
-        return np.clip(steering, -MAX_STEERING, MAX_STEERING)
+        return np.clip(np.arctan(2 * np.tan(slip)), -MAX_STEERING, MAX_STEERING)
 
     def _apply_meta_action(self, action: np.ndarray) -> None:
         """MDPVehicle.act / ControlledVehicle.act for the ego car's decision."""
