@@ -59,6 +59,8 @@ class Knobs:
     eval_episodes: int  # episodes for every sampled before/after return of a tree or DDT
     rolling_window: int  # episodes in the rolling mean of training reward
     fidelity_gammas: tuple[float, ...]  # other sharpnesses in the fidelity report's sensitivity rows
+    train_envs: int = 1  # episodes side by side when training on the domain's fast vector env
+    select_episodes: Optional[int] = None  # fast-env episodes for keep-best's sampled score of a tree
 
 
 Act = Callable[[np.ndarray], int]
@@ -94,6 +96,7 @@ class Domain:
     env_id: str
     knobs: Knobs
     exact_model: Optional[str] = None  # "module:factory" of an ExactModel, or None
+    train_env_id: Optional[str] = None  # a registered vector env (vector entry point) that trains faster than env_id
     one_hot: tuple[str, ...] = ()  # features of which exactly one is 1 (taxi's place); see uniform_states
 
     @cached_property
@@ -202,7 +205,8 @@ def load_domain(name: str, corpus: Path | None = None) -> Domain:
     if set(one_hot) - set(features):
         raise ValueError(f"{spec_path.name}: one_hot names unknown features {sorted(set(one_hot) - set(features))}")
     return Domain(name, vocab, tuple(features), weights, thresholds, impossible, spec["env_id"],
-                  _knobs(spec, spec_path.name), spec.get("exact_model"), one_hot)
+                  _knobs(spec, spec_path.name), exact_model=spec.get("exact_model"), one_hot=one_hot,
+                  train_env_id=spec.get("train_env_id"))
 
 
 def _knobs(spec: dict, file: str) -> Knobs:

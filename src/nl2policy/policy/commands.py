@@ -24,6 +24,7 @@ def optimize(
     out: Path = typer.Option(Path("runs/optimize"), help="Output folder; holding a checkpoint, the run resumes"),
     eval_episodes: Optional[int] = typer.Option(None, min=1, help="Episodes for the before/after returns (default: the domain's eval_episodes, domains/<name>.toml)"),
     polish: Optional[bool] = typer.Option(None, "--polish/--no-polish", help="Hill-climb the kept tree on the exact model (default: on where the domain has one, taxi)"),
+    simulator: str = typer.Option("fast", help="Train on the domain's fast simulator (highway: the vectorized twin) or on its reference env (highway-env); returns are always the reference env's"),
 ) -> None:
     """Improve a tree with PPO (tree -> DDT -> PPO -> tree), never returning a worse tree; writes trees, curve and summary.json."""
     import torch
@@ -39,7 +40,7 @@ def optimize(
         task = bar.add_task(f"{domain}: PPO steps", total=steps)
         try:
             summary = optimize_tree(domain, parsed, steps, seed, out, eval_episodes=eval_episodes, polish=polish,
-                                    progress=lambda n, total: bar.update(task, completed=n))
+                                    simulator=simulator, progress=lambda n, total: bar.update(task, completed=n))
         except ValueError as exc:
             fail(str(exc))
     console.print("[bold]before[/]\n" + to_text(parsed, d.vocab))

@@ -189,6 +189,28 @@ def tree_act_fn(domain_name: str, tree: Tree) -> Callable[[np.ndarray], int]:
     return act
 
 
+def tree_batch_act_fn(domain_name: str, tree: Tree) -> Callable[[np.ndarray], np.ndarray]:
+    """Act with a discretized tree on a batch of feature rows (n, features) -> (n,) indices."""
+    domain = get_domain(domain_name)
+
+    def act(x: np.ndarray) -> np.ndarray:
+        x = np.atleast_2d(x)
+        answers = domain.answer_matrix(x)
+
+        def walk(node: Tree) -> np.ndarray:
+            if not isinstance(node, Node):
+                return np.full(len(x), domain.action_index(node.action), dtype=np.int64)
+            if node.question.startswith(RAW_PREFIX):
+                yes = np.array([_raw_answer(node.question, domain, row) for row in x], dtype=bool)
+            else:
+                yes = answers[:, domain.questions.index(node.question)]
+            return np.where(yes, walk(node.yes), walk(node.no))
+
+        return walk(tree)
+
+    return act
+
+
 def has_raw_tests(tree: Tree) -> bool:
     from nl2policy.trees.tree import iter_nodes
 

@@ -2,9 +2,10 @@
 checkpoint's discretized tree, so it never hands back a worse tree than it got.
 
 "Best" is judged where the domain allows it without noise: on the exact model (taxi), or else
-on the domain's ``eval_episodes`` episodes from ``SELECT_SEED`` (highway): common random
-numbers, every tree meets the same traffic, so a tree replaces the incumbent only by driving
-better on those episodes. The seeds differ from ``EVAL_SEED``, on which ``optimize`` reports
+on sampled episodes from ``SELECT_SEED``: the knobs' ``select_episodes`` episodes of the
+domain's fast vector env where it has one (highway: 500 twin episodes), else its
+``eval_episodes`` episodes of the reference env. Common random numbers: every tree meets the
+same traffic, so a tree replaces the incumbent only by driving better on those episodes. The seeds differ from ``EVAL_SEED``, on which ``optimize`` reports
 returns, so a reported improvement is not the selection's own noise.
 """
 
@@ -14,8 +15,8 @@ import json
 from typing import Callable
 
 from nl2policy.domains import get_domain
-from nl2policy.policy.convert import tree_act_fn
-from nl2policy.policy.rollout import evaluate
+from nl2policy.policy.convert import tree_act_fn, tree_batch_act_fn
+from nl2policy.policy.rollout import evaluate, evaluate_batched
 from nl2policy.trees import Leaf, Node, Tree, tree_to_json
 
 SELECT_SEED = 60_000  # keep-best's sampled episodes: apart from EVAL_SEED (50,000 on) and training's
@@ -27,16 +28,29 @@ def tree_scorer(domain: str) -> tuple[Callable[[Tree], float], str]:
     d = get_domain(domain)
     if d.exact is not None:
         return (lambda tree: float(d.exact.expected_return(tree_act_fn(domain, tree)))), "exact expected return"
-    n = d.knobs.eval_episodes
     cache: dict[str, float] = {}
+    if d.train_env_id is not None and d.knobs.select_episodes:
+        n = d.knobs.select_episodes
+
+        def score(tree: Tree) -> float:
+            return evaluate_batched(domain, tree_batch_act_fn(domain, tree), n, SELECT_SEED).mean_return
+
+        rule = f"mean return over {n} episodes of {d.train_env_id}, seed {SELECT_SEED}"
+    else:
+        n = d.knobs.eval_episodes
+
+        def score(tree: Tree) -> float:
+            return evaluate(domain, tree_act_fn(domain, tree), n, SELECT_SEED).mean_return
+
+        rule = f"mean return over {n} episodes, seeds {SELECT_SEED}-{SELECT_SEED + n - 1}"
 
     def sampled(tree: Tree) -> float:
         key = json.dumps(tree_to_json(tree), sort_keys=True)
         if key not in cache:
-            cache[key] = evaluate(domain, tree_act_fn(domain, tree), n, SELECT_SEED).mean_return
+            cache[key] = score(tree)
         return cache[key]
 
-    return sampled, f"mean return over {n} episodes, seeds {SELECT_SEED}-{SELECT_SEED + n - 1}"
+    return sampled, rule
 
 
 def tree_from_json(data: dict) -> Tree:

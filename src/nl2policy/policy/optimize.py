@@ -82,7 +82,8 @@ def checkpoint_tree_score(domain: str, sampled: bool = False,
 
 def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int, steps: int, run_dir: Path,
                        progress: Progress = None,
-                       score_tree: Optional[Callable[[PPO], tuple[dict, float]]] = None) -> tuple[PPO, list, float, Optional[dict]]:
+                       score_tree: Optional[Callable[[PPO], tuple[dict, float]]] = None,
+                       simulator: str = "fast") -> tuple[PPO, list, float, Optional[dict]]:
     """Train to `steps` env steps, checkpointing into `run_dir`; resumes a saved run.
 
     With `score_tree`, the discretized tree is scored after every chunk and the best one kept
@@ -96,7 +97,8 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
     state_path, ckpt_path = run_dir / STATE, run_dir / CHECKPOINT
     if state_path.is_file() and ckpt_path.is_file():
         state = json.loads(state_path.read_text())
-        model = TreePPO.load(ckpt_path, env=make_vec_env(domain, seed + 1000 * (state["chunks"] + 1)), device="cpu")
+        env = make_vec_env(domain, seed + 1000 * (state["chunks"] + 1), simulator)
+        model = TreePPO.load(ckpt_path, env=env, device="cpu")
         episodes, seconds, chunks = [tuple(e) for e in state["episodes"]], state["seconds"], state["chunks"]
         best = state.get("best_tree")
         if best is None and score_tree is not None:  # a checkpoint from before its run tracked trees
@@ -108,7 +110,7 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
         if score_tree is not None:
             tree_json, score = score_tree(model)
             best = {"step": 0, "tree": tree_json, "score": score}
-    rollout = model.n_steps
+    rollout = model.n_steps * model.n_envs
     chunk = rollout * max(1, steps // (10 * rollout))  # about ten checkpoints per run
     log = EpisodeLog(episodes, steps, progress)
     while model.num_timesteps < steps:
@@ -166,7 +168,8 @@ def write_curve(episodes: list, window: int, out: Path, title: str) -> None:
 
 
 def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, progress: Progress = None,
-                  eval_episodes: Optional[int] = None, polish: Optional[bool] = None) -> dict:
+                  eval_episodes: Optional[int] = None, polish: Optional[bool] = None,
+                  simulator: str = "fast") -> dict:
     """PPO from the tree-initialized DDT, then keep-best and (`polish`, default: where the
     domain has an exact model) the polish; writes initial_tree.json, last_tree.json,
     best_tree.json, [polished_tree.json,] final_tree.json (what is returned), curve.csv,
@@ -182,8 +185,9 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
         raise ValueError(f"{out} holds a checkpoint of a run from a different tree; choose another --out")
     tree_path.write_text(json.dumps(tree_to_json(tree), indent=2))
     scorer, rule = tree_scorer(domain)
-    model, episodes, seconds, best = train_checkpointed(lambda: make_ppo(domain, "tree_ddt", seed, tree), domain, seed,
-                                                        steps, out, progress, checkpoint_tree_score(domain, True, scorer))
+    model, episodes, seconds, best = train_checkpointed(
+        lambda: make_ppo(domain, "tree_ddt", seed, tree, simulator=simulator), domain, seed, steps, out, progress,
+        checkpoint_tree_score(domain, True, scorer), simulator)
     last_tree = ddt_to_tree(domain, actor_ddt(model))
     (out / "last_tree.json").write_text(json.dumps(tree_to_json(last_tree), indent=2))
     start = time.perf_counter()
@@ -208,7 +212,8 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
     rolling = rolling_mean([r for _, r in episodes], window)
     summary = {
         "domain": domain, "seed": seed, "steps": int(model.num_timesteps), "seconds": round(seconds, 2),
-        "eval_episodes": n, "eval_seed": EVAL_SEED, "returned": returned,
+        "trained_on": d.train_env_id if simulator == "fast" and d.train_env_id else d.env_id,
+        "evaluated_on": d.env_id, "eval_episodes": n, "eval_seed": EVAL_SEED, "returned": returned,
         "initial_mean_return": evaluate(domain, tree_policy(domain, tree), n, EVAL_SEED).mean_return,
         "final_mean_return": evaluate(domain, tree_act_fn(domain, final_tree), n, EVAL_SEED).mean_return,
         "last_tree_mean_return": evaluate(domain, tree_act_fn(domain, last_tree), n, EVAL_SEED).mean_return,

@@ -61,3 +61,30 @@ def evaluate(domain: str, act: ActFn, episodes: int = 20, seed: int = 0, env=Non
     arr = np.array(returns)
     stderr = float(arr.std(ddof=1) / math.sqrt(len(arr))) if len(arr) > 1 else 0.0
     return Evaluation(float(arr.mean()), stderr, episodes, returns)
+
+
+BatchActFn = Callable[[np.ndarray], np.ndarray]
+
+
+def evaluate_batched(domain: str, act: BatchActFn, episodes: int, seed: int) -> Evaluation:
+    """Mean return of `act` (a batch of feature rows -> action indices) over `episodes`
+    episodes of the domain's fast vector env (``train_env_id``), all side by side: each env's
+    first episode counts. The same seed gives the same scenes, so trees scored with one seed
+    meet the same traffic (common random numbers)."""
+    d = get_domain(domain)
+    if d.train_env_id is None:
+        raise ValueError(f"{domain} has no fast vector env to evaluate on")
+    if episodes < 1:
+        raise ValueError("episodes must be at least 1")
+    import gymnasium as gym
+
+    env = gym.make_vec(d.train_env_id, num_envs=episodes, vectorization_mode="vector_entry_point")
+    obs, _ = env.reset(seed=seed)
+    totals, running = np.zeros(episodes), np.ones(episodes, dtype=bool)
+    while running.any():
+        obs, reward, terminated, truncated, _ = env.step(np.asarray(act(obs), dtype=np.int64))
+        totals += np.where(running, reward, 0.0)
+        running &= ~(terminated | truncated)
+    env.close()
+    stderr = float(totals.std(ddof=1) / math.sqrt(episodes)) if episodes > 1 else 0.0
+    return Evaluation(float(totals.mean()), stderr, episodes, totals.tolist())

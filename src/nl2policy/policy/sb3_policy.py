@@ -14,16 +14,18 @@ from __future__ import annotations
 import copy
 from typing import Optional
 
+import gymnasium as gym
 from stable_baselines3 import PPO
 from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.policies import ActorCriticPolicy
-from stable_baselines3.common.vec_env import DummyVecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor
 
 from nl2policy.domains import get_domain, make_env
 from nl2policy.domains.spec import Knobs
 from nl2policy.policy.convert import tree_to_ddt
 from nl2policy.policy.ddt import DDT, random_ddt
+from nl2policy.policy.vec_env import SB3VecEnv
 from nl2policy.trees import Tree
 
 METHODS = ("tree_ddt", "random_ddt", "mlp")
@@ -69,7 +71,23 @@ class DDTPolicy(ActorCriticPolicy):
         self.optimizer = self.optimizer_class(groups, lr=lr, **self.optimizer_kwargs)
 
 
-def make_vec_env(domain: str, seed: int) -> DummyVecEnv:
+SIMULATORS = ("fast", "reference")
+
+
+def make_vec_env(domain: str, seed: int, simulator: str = "fast") -> VecEnv:
+    """The env PPO trains on, seeded: the domain's fast vector env (``train_env_id``, the
+    knobs' ``train_envs`` episodes side by side) where it has one and `simulator` is "fast";
+    else one episode at a time of its reference env (``env_id``). Episode returns come from
+    SB3's monitors either way."""
+    if simulator not in SIMULATORS:
+        raise ValueError(f"unknown simulator {simulator!r}; choose one of {', '.join(SIMULATORS)}")
+    d = get_domain(domain)
+    if simulator == "fast" and d.train_env_id is not None:
+        vector = gym.make_vec(d.train_env_id, num_envs=d.knobs.train_envs, vectorization_mode="vector_entry_point")
+        env = VecMonitor(SB3VecEnv(vector))
+        env.seed(seed)
+        return env
+
     def build():
         env = Monitor(make_env(domain))
         env.reset(seed=seed)
@@ -95,9 +113,10 @@ def initial_actor(domain: str, method: str, seed: int, tree: Optional[Tree] = No
 
 
 def make_ppo(domain: str, method: str, seed: int, tree: Optional[Tree] = None, env=None,
-             knobs: Optional[Knobs] = None) -> PPO:
-    """PPO for `method` with the domain's knobs, or `knobs` where an experiment varies them."""
-    env = env or make_vec_env(domain, seed)
+             knobs: Optional[Knobs] = None, simulator: str = "fast") -> PPO:
+    """PPO for `method` with the domain's knobs, or `knobs` where an experiment varies them,
+    on `env` or else ``make_vec_env(domain, seed, simulator)``."""
+    env = env or make_vec_env(domain, seed, simulator)
     knobs = knobs or get_domain(domain).knobs
     settings = knobs.ppo.as_kwargs()
     actor = initial_actor(domain, method, seed, tree, knobs)
