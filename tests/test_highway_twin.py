@@ -155,3 +155,29 @@ def test_sb3_ppo_trains_on_the_twin_vec_env():
     model.learn(total_timesteps=768)
     assert model.num_timesteps >= 768
     assert len(model.ep_info_buffer) > 0  # VecMonitor saw whole episodes end
+
+
+def test_highway_trains_on_the_twin_unless_told_otherwise():
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from nl2policy.policy.sb3_policy import make_vec_env
+
+    fast = make_vec_env("highway", seed=0)
+    assert fast.num_envs == get_domain("highway").knobs.train_envs > 1
+    assert isinstance(fast.venv, SB3VecEnv) and isinstance(fast.venv.env, HighwayTwinVectorEnv)
+    assert isinstance(make_vec_env("highway", seed=0, simulator="reference"), DummyVecEnv)
+    assert isinstance(make_vec_env("taxi", seed=0), DummyVecEnv)  # taxi has one simulator
+    with pytest.raises(ValueError, match="unknown simulator"):
+        make_vec_env("highway", seed=0, simulator="warp")
+
+
+def test_optimize_highway_on_the_twin_reports_highway_env_returns(tmp_path):
+    from nl2policy.policy.optimize import optimize_tree
+
+    tree = parse_tree(WEAVER, get_domain("highway").vocab)
+    summary = optimize_tree("highway", tree, steps=64, seed=0, out=tmp_path, eval_episodes=2)
+    assert summary["trained_on"] == "nl2policy/HighwayTwin-v0"
+    assert summary["evaluated_on"] == "nl2policy/Highway-v0"
+    assert summary["steps"] == 16 * 256  # one rollout of 16 twin episodes
+    assert "HighwayTwin" in summary["keep_best"]["scored_by"]
+    assert summary["keep_best"]["kept_score"] >= summary["keep_best"]["initial_score"]
