@@ -81,3 +81,30 @@ def test_kfold_by_writer_holds_whole_writers_out():
     assert sorted(held) == writers(specs)
     with pytest.raises(ValueError, match="only 8 writers"):
         list(kfold(specs, k=9, by_writer=True))
+
+
+def test_leave_trees_out_folds_hold_whole_policies_out():
+    from nl2policy.language.corpus import policy_key
+
+    specs = load_corpus("taxi", rounds=(1, 2))
+    folds = list(kfold(specs, 5, seed=1, by_tree=True))
+    assert sorted(i for _, test in folds for i in test) == list(range(len(specs)))
+    sizes = [len(test) for _, test in folds]
+    assert max(sizes) - min(sizes) <= max(sizes) // 4  # near equal, although policies recur unevenly
+    for train, test in folds:
+        seen = {policy_key("taxi", specs[i].tree) for i in train}
+        assert not seen & {policy_key("taxi", specs[i].tree) for i in test}
+    assert [t for _, t in kfold(specs, 5, seed=2, by_tree=True)] != [t for _, t in folds]  # repeats differ
+    with pytest.raises(ValueError):
+        next(kfold(specs, 5, by_tree=True, by_writer=True))
+
+
+def test_leave_trees_out_protocol_plans_five_folds_a_repeat_on_both_rounds():
+    from nl2policy.language.commands import parse_plan
+    from nl2policy.language.evaluate import PROTOCOL_ROUNDS, plan_folds
+
+    specs = load_corpus("highway", rounds=PROTOCOL_ROUNDS["trees"])
+    folds = plan_folds(specs, "trees", 2)
+    assert [key for key, _, _ in folds][:6] == [f"trees-r0-f{f}" for f in range(5)] + ["trees-r1-f0"]
+    assert len(folds) == 10 and len(specs) == 320
+    assert parse_plan("single:trees3", ["taxi"], "single") == [("taxi", "seq2tree-minilm-synth", "trees", 3)]

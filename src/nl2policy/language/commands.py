@@ -102,7 +102,8 @@ def _jsonl_line(domain: str, name: str, line: str, lineno: int) -> dict:
 def parse_plan(plan: str, domains: list[str], default_model: str) -> list[tuple[str, str, str, int]]:
     """'model:protocols;...' -> (domain, model, protocol, repeats) steps, in plan order. A model
     prefixed with 'DOMAIN/' runs for that domain only (a probe of one domain must not be listed as
-    not run in the others); protocols are cvR (R repeats of 5-fold CV) and writers."""
+    not run in the others); protocols are cvR (R repeats of 5-fold CV), treesR (R repeats of
+    5-fold leave-trees-out on both corpus rounds) and writers."""
     from nl2policy.language.models.config import MODELS
 
     alias = {"best": default_model, "single": "seq2tree-minilm-synth", "ablation": "seq2tree-minilm"}
@@ -120,8 +121,10 @@ def parse_plan(plan: str, domains: list[str], default_model: str) -> list[tuple[
                 protocol, repeats = "writers", 1
             elif p.startswith("cv") and (p[2:] or "1").isdigit():
                 protocol, repeats = "cv", int(p[2:] or 1)
+            elif p.startswith("trees") and (p[5:] or "1").isdigit():
+                protocol, repeats = "trees", int(p[5:] or 1)
             else:
-                raise ValueError(f"plan part {part!r}: protocol {p!r} is not cvR or writers")
+                raise ValueError(f"plan part {part!r}: protocol {p!r} is not cvR, treesR or writers")
             steps += [(d, name, protocol, repeats) for d in domains if not only or d == only]
     return steps
 

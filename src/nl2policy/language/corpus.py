@@ -66,14 +66,42 @@ def writers(specs: Sequence[Spec]) -> list[str]:
 Split = tuple[list[int], list[int]]
 
 
-def kfold(specs: Sequence[Spec], k: int = 5, seed: int = 0, by_writer: bool = False) -> Iterator[Split]:
+def policy_key(domain: str, tree: Tree) -> tuple[str, ...]:
+    """What a tree does in every situation the world can produce (its action for each possible
+    answer set): two trees with the same key are the same policy, however they are drawn."""
+    d = get_domain(domain)
+    return tuple(tree.act(answers) for answers in d.possible_answer_sets)
+
+
+def kfold(specs: Sequence[Spec], k: int = 5, seed: int = 0, by_writer: bool = False,
+          by_tree: bool = False) -> Iterator[Split]:
     """(train indices, test indices) for each of `k` folds.
 
     With ``by_writer`` the folds partition the writers, so no test writer appears in
-    training (leave-writers-out); otherwise items are shuffled and dealt into folds.
+    training (leave-writers-out). With ``by_tree`` they partition the policies (``policy_key``),
+    so no test spec's policy appears in training, however its tree is drawn (leave-trees-out:
+    the translator must compose a tree it never saw). Otherwise items are shuffled and dealt
+    into folds.
     """
+    if by_writer and by_tree:
+        raise ValueError("hold out writers or trees, not both")
     rng = random.Random(seed)
-    if by_writer:
+    if by_tree:
+        keys = [policy_key(s.domain, s.tree) for s in specs]
+        distinct = sorted(set(keys))
+        if k > len(distinct):
+            raise ValueError(f"{k} tree folds asked for, but only {len(distinct)} distinct policies")
+        rng.shuffle(distinct)
+        # Deal the policies, largest group first, each to the fold with the fewest specs so far,
+        # so the folds are near equal in specs although groups differ in size.
+        size = {key: keys.count(key) for key in distinct}
+        fold_size, fold_of_key = [0] * k, {}
+        for key in sorted(distinct, key=lambda key: -size[key]):
+            fold = min(range(k), key=lambda f: fold_size[f])
+            fold_of_key[key] = fold
+            fold_size[fold] += size[key]
+        fold_of = [fold_of_key[key] for key in keys]
+    elif by_writer:
         names = writers(specs)
         if k > len(names):
             raise ValueError(f"{k} writer folds asked for, but only {len(names)} writers")

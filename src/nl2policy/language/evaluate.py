@@ -129,11 +129,19 @@ def machine() -> str:
     return f"{model or platform.machine()}, {'avx512' if 'avx512f' in flags else 'no avx512'}"
 
 
+PROTOCOL_ROUNDS = {"cv": (1,), "writers": (1,), "trees": (1, 2)}
+"""The corpus rounds each protocol runs on: the paper's protocol and leave-writers-out on round
+1, as before; leave-trees-out on both rounds (round 2's trees are all new to round 1)."""
+
+
 def plan_folds(specs: Sequence[Spec], protocol: str, repeats: int) -> list[tuple[str, list[int], list[int]]]:
     """(fold key, train, test). "cv": 5 folds x `repeats` (fold seed = repeat); "writers":
-    4 folds of 2 held-out writers each."""
+    4 folds of 2 held-out writers each; "trees": 5 folds x `repeats` of held-out policies."""
     if protocol == "cv":
         return [(f"cv-r{r}-f{f}", tr, te) for r in range(repeats) for f, (tr, te) in enumerate(kfold(specs, 5, seed=r))]
+    if protocol == "trees":
+        return [(f"trees-r{r}-f{f}", tr, te) for r in range(repeats)
+                for f, (tr, te) in enumerate(kfold(specs, 5, seed=r, by_tree=True))]
     return [(f"writers-f{f}", tr, te) for f, (tr, te) in enumerate(kfold(specs, 4, seed=0, by_writer=True))]
 
 
@@ -151,7 +159,7 @@ def run_experiment(plan: Sequence[tuple[str, str, str, int]], out: Path,
     done = {(r["domain"], r["model"], r["fold"]) for r in read_runs(runs)}
     caches: dict[str, MiniLMCache] = {}
     for domain, name, protocol, repeats in plan:
-        specs = load_corpus(domain)
+        specs = load_corpus(domain, rounds=PROTOCOL_ROUNDS[protocol])
         cache = caches.setdefault(domain, MiniLMCache())
         for key, tr, te in plan_folds(specs, protocol, repeats):
             if (domain, name, key) in done:
