@@ -74,7 +74,8 @@ def write_ceilings(result: dict, out: Path, command: str) -> Path:
     for depth, e in result["best_trees"].items():
         c = e["counts"]
         lines.append(f"| best dictionary tree, depth <= {depth} | {e['value']:.4f} | {e['percent_of_optimum']:.1f} | "
-                     f"{c['pairs_in_space']:,} (root question, yes map, no map) candidates, {c['side_bounds_computed']:,} "
+                     f"{c['trees_unrestricted']:,} trees; {c['pairs_in_space']:,} (root question, yes map, no map) "
+                     f"candidates, {c['side_bounds_computed']:,} "
                      f"side bounds, {c['pairs_scored']:,} scored exactly | {e['seconds']:.1f} |")
     bc = result["best_corpus_tree"]
     lines += [f"| best corpus tree (of {bc['distinct_corpus_trees']} distinct) | {bc['value']:.4f} | "

@@ -228,7 +228,8 @@ def best_tree(tables: TaxiTables, depth: int = 3, progress: Progress = None) -> 
     values = _returns(tables, trees.policies(reach, shallow_maps))
     best = int(np.argmax(values))
     value, best_map, best_tree_ = float(values[best]), shallow_maps[best], shallow[shallow_maps[best]]
-    counts = {"depth": depth, f"distinct_maps_depth_le_{depth - 1}": len(shallow_maps), "root_questions": {},
+    counts = {"depth": depth, "trees_unrestricted": _tree_count(len(trees.domain.questions), len(trees.domain.actions), depth),
+              f"distinct_maps_depth_le_{depth - 1}": len(shallow_maps), "root_questions": {},
               "pairs_in_space": 0, "pairs_scored": 0, "side_bounds_computed": 0}
     for question in trees.domain.questions:
         yes, no = trees.split(reach, question)
@@ -267,6 +268,11 @@ def best_tree(tables: TaxiTables, depth: int = 3, progress: Progress = None) -> 
             progress(f"depth-{depth} trees: root {question} done, best {value:.4f}")
     return Ceiling(value, [int(a) for a in trees.policies(reach, [best_map])[0]], best_tree_, counts,
                    time.perf_counter() - start)
+
+
+def _tree_count(questions: int, actions: int, depth: int) -> int:
+    """How many trees of depth <= `depth` there are, valid or not: the space the maps stand for."""
+    return actions if depth == 0 else actions + questions * _tree_count(questions, actions, depth - 1) ** 2
 
 
 def _node(question: str, yes: Tree, no: Tree) -> Tree:
