@@ -39,7 +39,7 @@ from scipy.stats import spearmanr
 
 from nl2policy.data import corpus_dir
 from nl2policy.domains import get_domain
-from nl2policy.domains.highway import HighwayFeatures
+from nl2policy.domains.highway import META_ACTION, HighwayFeatures
 from nl2policy.domains.highway_twin import HighwayTwin, copy_scene_to
 from nl2policy.domains.highway_vec import twin_episodes
 from nl2policy.trees import parse_tree, tree_to_json
@@ -98,31 +98,27 @@ def highway_env_chunk(policy: int, tree: Optional[dict], first: int, count: int,
 def paired_chunk(policy: int, tree: Optional[dict], first: int, count: int, seed: int) -> dict:
     """Twin scenes first .. first+count-1 of PAIRED_SEED, each run in the twin and in highway-env."""
     env = HighwayFeatures()
-    twin_all = HighwayTwin(first + count, seed=seed)
+    twin_all = HighwayTwin(first + count, seed=seed)  # the scenes, fixed by the seed and the chunk
     rows = []
     for episode in range(first, first + count):
-        act = batch_policy(tree, seed + episode)
         twin = HighwayTwin(1)
         for name in ("x", "y", "heading", "speed", "target_speed", "delta", "timer", "lane", "target_lane"):
             getattr(twin, name)[0] = getattr(twin_all, name)[episode]
         env.reset(seed=seed + episode)
         copy_scene_to(env, twin, 0)
+        # Each simulator gets its own copy of the policy, so a random policy draws the same actions in both.
         highway = _run_highway_env(env, twin.features()[0], batch_policy(tree, seed + episode))
+        act = batch_policy(tree, seed + episode)
         total, done = 0.0, False
         obs = twin.features()
         while not done:
-            reward, terminated, truncated = twin.step(np.asarray([_meta(int(act(obs)[0]))]))
+            reward, terminated, truncated = twin.step(np.asarray([META_ACTION[int(act(obs)[0])]]))
             obs = twin.features()
             total += float(reward[0])
             done = bool(terminated[0] or truncated[0])
         rows.append({"highway_env": highway["return"], "twin": total})
     env.close()
     return {"kind": "paired", "policy": policy, "first": first, "count": count, "episodes": rows}
-
-
-def _meta(action: int) -> int:
-    from nl2policy.domains.highway import META_ACTION
-    return META_ACTION[action]
 
 
 def _run_highway_env(env: HighwayFeatures, obs: np.ndarray, act: Callable) -> dict:
