@@ -25,7 +25,7 @@ def train_translator(
 ) -> None:
     """Train a translator on the whole shared corpus and save it as the domain's model (resumes
     from its checkpoint if a run was interrupted)."""
-    from nl2policy.cli import domain_or_fail, err, fail, progress_bar
+    from nl2policy.console import domain_or_fail, err, fail, progress_bar
     from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
     from nl2policy.language.translate import train_default
 
@@ -48,10 +48,8 @@ def translate_cmd(
     model: Optional[str] = typer.Option(None, help="Model name (default: the best model)"),
 ) -> None:
     """Translate a description into a policy tree with its confidence."""
-    from nl2policy.cli import console, domain_or_fail, err, fail
+    from nl2policy.console import console, description_or_fail, domain_or_fail, err, fail
     from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
-    from nl2policy.language.translate import EmptyDescription, get_model, translate
-    from nl2policy.trees import to_text
 
     d = domain_or_fail(domain)
     name = model or DEFAULT_MODEL
@@ -62,12 +60,25 @@ def translate_cmd(
             fail("give either a TEXT argument or --jsonl FILE, not both")
         if not jsonl.is_file():
             fail(f"no such file: {jsonl}")
+        try:
+            lines = jsonl.read_text(encoding="utf-8").splitlines()
+        except UnicodeDecodeError:
+            fail(f"--jsonl {jsonl} is not a UTF-8 text file (one JSON object per line)")
+        except OSError as exc:
+            fail(f"cannot read --jsonl {jsonl}: {exc.strerror or exc}")
+        from nl2policy.language.translate import get_model
+
         get_model(domain, name)
-        for lineno, line in enumerate(jsonl.read_text().splitlines(), 1):
+        for lineno, line in enumerate(lines, 1):
             print(json.dumps(_jsonl_line(domain, name, line, lineno)), flush=True)
         return
     if text is None:
         fail("give a description to translate (or --jsonl FILE)")
+    if text.strip():  # an empty one gets the translator's own message below
+        description_or_fail(text)
+    from nl2policy.language.translate import EmptyDescription, translate
+    from nl2policy.trees import to_text
+
     try:
         result = translate(domain, text, name)
     except EmptyDescription as exc:
@@ -84,6 +95,7 @@ def translate_cmd(
 def _jsonl_line(domain: str, name: str, line: str, lineno: int) -> dict:
     """One output object per input line: the translation, or {"error": why}."""
     from nl2policy.language.translate import EmptyDescription, translate
+    from nl2policy.limits import MAX_DESCRIPTION
 
     try:
         row = json.loads(line)
@@ -93,6 +105,9 @@ def _jsonl_line(domain: str, name: str, line: str, lineno: int) -> dict:
         return {"error": f"line {lineno}: no 'description' field"}
     if not isinstance(row["description"], str):
         return {"error": f"line {lineno}: 'description' must be a string"}
+    if len(row["description"]) > MAX_DESCRIPTION:
+        return {"error": f"line {lineno}: the description is {len(row['description']):,} characters long; "
+                         f"the limit is {MAX_DESCRIPTION:,}"}
     try:
         return translate(domain, row["description"], name).to_json()
     except EmptyDescription as exc:
@@ -148,7 +163,7 @@ def translation_experiment(
     """Cross-validation and leave-writers-out accuracy of every translator (resumable)."""
     import torch
 
-    from nl2policy.cli import console, domain_or_fail, err
+    from nl2policy.console import console, domain_or_fail, err
     from nl2policy.language.evaluate import run_experiment
     from nl2policy.language.summary import summarize
     from nl2policy.language.models.config import DEFAULT_MODEL
