@@ -113,8 +113,13 @@ _register_area_commands()
 
 
 def main() -> None:  # pragma: no cover - console entry
+    """The ``nl2policy`` executable: the command line owns the process (see
+    ``console.exit_without_teardown``)."""
+    from nl2policy import console as terminal
+
+    terminal.owns_process = True
     app()
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(app())
+    sys.exit(main())

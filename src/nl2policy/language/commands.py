@@ -48,7 +48,7 @@ def translate_cmd(
     model: Optional[str] = typer.Option(None, help="Model name (default: the best model)"),
 ) -> None:
     """Translate a description into a policy tree with its confidence."""
-    from nl2policy.console import console, description_or_fail, domain_or_fail, err, fail
+    from nl2policy.console import console, description_or_fail, domain_or_fail, err, exit_without_teardown, fail
     from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
 
     d = domain_or_fail(domain)
@@ -76,20 +76,27 @@ def translate_cmd(
         fail("give a description to translate (or --jsonl FILE)")
     if text.strip():  # an empty one gets the translator's own message below
         description_or_fail(text)
+    import torch
+
     from nl2policy.language.translate import EmptyDescription, translate
     from nl2policy.trees import to_text
 
+    # One torch thread, as the server and the experiments translate: a single short text gains
+    # nothing from more, and starting torch's thread pool made a cold translation's first pass
+    # 0.8-1.3 s instead of 0.08 s on a busy 2-core machine (benchmarks/cold_translate.py).
+    torch.set_num_threads(1)
     try:
         result = translate(domain, text, name)
     except EmptyDescription as exc:
         fail(str(exc))
     if json_out:
         print(json.dumps(result.to_json()))
-        return
-    console.print(to_text(result.tree, d.vocab), highlight=False)
-    console.print(f"confidence: {result.confidence:.2f}", highlight=False)
-    for w in result.warnings:
-        err.print(f"[yellow]warning:[/] {w}", highlight=False)
+    else:
+        console.print(to_text(result.tree, d.vocab), highlight=False)
+        console.print(f"confidence: {result.confidence:.2f}", highlight=False)
+        for w in result.warnings:
+            err.print(f"[yellow]warning:[/] {w}", highlight=False)
+    exit_without_teardown()
 
 
 def _jsonl_line(domain: str, name: str, line: str, lineno: int) -> dict:
