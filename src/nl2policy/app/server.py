@@ -13,11 +13,13 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from fastapi import FastAPI, HTTPException, Request
-from fastapi.responses import FileResponse, JSONResponse, Response
+from fastapi.openapi.docs import get_swagger_ui_html
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
-from nl2policy.app import guards
+from nl2policy.app import guards, outcome
+from nl2policy.app.places import place
 from nl2policy.app.baselines import baseline_curves
 from nl2policy.app.runlock import holder
 from nl2policy.app.runs import RunManager, read_curve
@@ -72,7 +74,9 @@ def _parse(domain: str, tree: Any = None, grid: Optional[list] = None):
             raise TreeError("give a tree or a grid", "request")
         return parse_tree(tree, d.vocab)
     except TreeError as exc:
-        raise HTTPException(422, {"message": exc.message, "where": exc.where, "error": str(exc)}) from exc
+        words = place(exc.where, d.vocab, tree=tree, grid=grid)
+        raise HTTPException(422, {"message": exc.message, "where": exc.where, "place": words,
+                                  "error": f"{words}: {exc.message}"}) from exc
 
 
 def _tree_view(domain: str, tree, node_confidence: Optional[dict] = None) -> dict:
@@ -118,7 +122,7 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
         yield
         runs.stop()
 
-    app = FastAPI(title="nl2policy", version="0.1.0", lifespan=lifespan,
+    app = FastAPI(title="nl2policy", version="0.1.0", lifespan=lifespan, docs_url=None, redoc_url=None,
                   description="Describe a policy in plain English, inspect and edit its tree, optimize it with PPO.")
     app.state.store, app.state.runs = store, runs
     guards.install(app, allowed_hosts, MAX_BODY_BYTES)
@@ -187,7 +191,9 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
         if body.domain != spec["domain"]:
             raise HTTPException(422, {"message": f"specification {spec_id} is for {spec['domain']}", "where": "domain"})
         tree = _parse(body.domain, body.tree, body.grid)
-        store.update_spec_tree(spec_id, tree_to_json(tree))
+        old_grid, new_grid = to_grid(parse_tree(spec["tree"], get_domain(spec["domain"]).vocab)), to_grid(tree)
+        kept = {k: v for k, v in spec["node_confidence"].items() if old_grid[int(k)] == new_grid[int(k)]}
+        store.update_spec_tree(spec_id, tree_to_json(tree), kept)
         return get_spec(spec_id)
 
     # --- optimize ---------------------------------------------------------------------------
@@ -205,7 +211,7 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
 
     @app.get("/api/runs")
     def list_runs() -> list[dict]:
-        return store.list_runs()
+        return [{**run, "progress": outcome.progress(run)} for run in store.list_runs()]
 
     @app.get("/api/runs/{run_id}")
     def run_view(run_id: str) -> dict:
@@ -213,7 +219,7 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
         if not run:
             raise HTTPException(404, f"no run {run_id!r}")
         out = Path(run["out_dir"])
-        view: dict[str, Any] = {**run, "curve": read_curve(out, run["domain"])}
+        view: dict[str, Any] = {**run, "curve": read_curve(out, run["domain"]), "progress": outcome.progress(run)}
         vocab = get_domain(run["domain"]).vocab
         initial = parse_tree(run["tree"], vocab)
         view["initial"] = _tree_view(run["domain"], initial)
@@ -227,6 +233,7 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
                                  "svg": to_svg(final, vocab, highlight={s: "#fff59d" for s in slots})}
             except TreeError:  # a raw threshold test the domain has no question for
                 view["final"] = {"tree": final_json, "changed": [], "svg": None, "text": json.dumps(final_json, indent=1)}
+            view["result"] = outcome.result(run["summary"], view["final"]["changed"])
         return view
 
     @app.post("/api/runs/{run_id}/resume")
@@ -301,6 +308,20 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
 
     # --- pages ------------------------------------------------------------------------------
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
+
+    @app.get("/docs", include_in_schema=False)
+    def api_reference() -> FileResponse:
+        """The API reference, drawn from /openapi.json by a page served here: it works offline
+        (FastAPI's Swagger UI loads its scripts from a CDN; it stays at /docs/swagger)."""
+        return FileResponse(STATIC / "docs.html")
+
+    @app.get("/docs/swagger", include_in_schema=False)
+    def swagger() -> HTMLResponse:
+        return get_swagger_ui_html(openapi_url="/openapi.json", title="nl2policy API (Swagger UI, needs internet)")
+
+    @app.get("/favicon.ico", include_in_schema=False)
+    def favicon() -> FileResponse:
+        return FileResponse(STATIC / "favicon.svg", media_type="image/svg+xml")
 
     @app.get("/", include_in_schema=False)
     def specify_page() -> FileResponse:

@@ -113,9 +113,13 @@ class Store:
                  json.dumps(warnings), json.dumps(node_confidence), now, now))
         return self.get_spec(spec_id)
 
-    def update_spec_tree(self, spec_id: str, tree: dict) -> Optional[dict]:
+    def update_spec_tree(self, spec_id: str, tree: dict, node_confidence: Optional[dict] = None) -> Optional[dict]:
+        """A new tree for a spec; `node_confidence` replaces the translator's per-node confidences
+        (an edited node has none: the translator never proposed it)."""
         with self._connect() as db:
-            cur = db.execute("UPDATE specs SET tree=?, updated=? WHERE id=?", (json.dumps(tree), time.time(), spec_id))
+            cur = db.execute("UPDATE specs SET tree=?, node_confidence=COALESCE(?, node_confidence), updated=? WHERE id=?",
+                             (json.dumps(tree), None if node_confidence is None else json.dumps(node_confidence),
+                              time.time(), spec_id))
             if cur.rowcount == 0:
                 return None
         return self.get_spec(spec_id)
