@@ -149,3 +149,27 @@ def test_failed_runs_do_not_resume(idle_client):
     idle_client.app.state.store.set_run_status(run_id, "failed", error="boom")
     r = idle_client.post(f"/api/runs/{run_id}/resume")
     assert r.status_code == 409 and "boom" in r.json()["detail"]
+
+
+@pytest.mark.parametrize("host,extra,warned,allowed", [
+    ("127.0.0.1", [], False, {"127.0.0.1", "localhost", "::1"}),
+    ("0.0.0.0", [], True, None),
+    ("0.0.0.0", ["--allow-host", "box.lan"], True, {"127.0.0.1", "localhost", "::1", "box.lan"}),
+    ("192.168.1.5", [], True, {"127.0.0.1", "localhost", "::1", "192.168.1.5"}),
+])
+def test_serve_warns_beyond_loopback_and_passes_the_allowed_hosts(tmp_path, monkeypatch, host, extra, warned, allowed):
+    import uvicorn
+    from typer.testing import CliRunner
+
+    import nl2policy.app.server as server
+    from nl2policy.cli import app
+
+    seen = {}
+    real_create_app = server.create_app
+    monkeypatch.setattr(server, "create_app", lambda *a, **kw: seen.update(kw) or real_create_app(*a, **kw))
+    monkeypatch.setattr(uvicorn, "run", lambda application, **kw: seen.update(run=kw))
+    result = CliRunner().invoke(app, ["serve", "--host", host, "--data-dir", str(tmp_path), *extra])
+    assert result.exit_code == 0, result.output
+    assert ("warning: listening on" in result.stderr) == warned
+    assert seen["run"]["host"] == host
+    assert (None if seen["allowed_hosts"] is None else set(seen["allowed_hosts"])) == allowed

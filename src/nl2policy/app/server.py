@@ -197,6 +197,12 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
         return get_spec(spec_id)
 
     # --- optimize ---------------------------------------------------------------------------
+    def run_or_404(run_id: str) -> dict:
+        run = store.get_run(run_id)
+        if not run:
+            raise HTTPException(404, f"no run {run_id!r}")
+        return run
+
     @app.post("/api/runs", status_code=201)
     def start_run(body: RunIn) -> dict:
         tree = _parse(body.domain, body.tree)
@@ -215,9 +221,7 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
 
     @app.get("/api/runs/{run_id}")
     def run_view(run_id: str) -> dict:
-        run = store.get_run(run_id)
-        if not run:
-            raise HTTPException(404, f"no run {run_id!r}")
+        run = run_or_404(run_id)
         out = Path(run["out_dir"])
         view: dict[str, Any] = {**run, "curve": read_curve(out, run["domain"]), "progress": outcome.progress(run)}
         vocab = get_domain(run["domain"]).vocab
@@ -238,9 +242,7 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
 
     @app.post("/api/runs/{run_id}/resume")
     def resume_run(run_id: str) -> dict:
-        run = store.get_run(run_id)
-        if not run:
-            raise HTTPException(404, f"no run {run_id!r}")
+        run = run_or_404(run_id)
         if run["status"] == "failed":
             raise HTTPException(409, f"run {run_id} failed ({run['error']}); resuming would fail the same way: "
                                      "start a new run")
@@ -255,9 +257,7 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
     @app.post("/api/runs/{run_id}/cancel")
     def cancel_run(run_id: str) -> dict:
         """Stop a queued or running run; it keeps its last checkpoint and can be resumed."""
-        run = store.get_run(run_id)
-        if not run:
-            raise HTTPException(404, f"no run {run_id!r}")
+        run = run_or_404(run_id)
         if not runs.cancel(run_id):
             raise HTTPException(409, f"run {run_id} is {run['status']}; only queued or running runs can be cancelled")
         return run_view(run_id)
@@ -265,9 +265,7 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
     @app.delete("/api/runs/{run_id}")
     def delete_run(run_id: str) -> dict:
         """Forget a run that is not going, and delete its folder."""
-        run = store.get_run(run_id)
-        if not run:
-            raise HTTPException(404, f"no run {run_id!r}")
+        run = run_or_404(run_id)
         if run["status"] in WAITING:
             raise HTTPException(409, f"run {run_id} is {run['status']}; cancel it first")
         out = Path(run["out_dir"])
