@@ -168,6 +168,7 @@ def test_serve_warns_beyond_loopback_and_passes_the_allowed_hosts(tmp_path, monk
     real_create_app = server.create_app
     monkeypatch.setattr(server, "create_app", lambda *a, **kw: seen.update(kw) or real_create_app(*a, **kw))
     monkeypatch.setattr(uvicorn, "run", lambda application, **kw: seen.update(run=kw))
+    monkeypatch.setattr("nl2policy.app.commands._port_free_or_fail", lambda host, port: None)  # 192.168.1.5 is not ours
     result = CliRunner().invoke(app, ["serve", "--host", host, "--data-dir", str(tmp_path), *extra])
     assert result.exit_code == 0, result.output
     assert ("warning: listening on" in result.stderr) == warned

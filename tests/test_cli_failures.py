@@ -124,3 +124,14 @@ def test_cli_and_api_refuse_the_same_long_description(tmp_path):
 
 def test_punctuation_only_description_is_one_line():
     one_error_line(runner.invoke(app, ["translate", "--domain", "taxi", "?!.,;"]), "empty")
+
+
+def test_serve_on_a_port_in_use_or_a_bad_host():
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        one_error_line(runner.invoke(app, ["serve", "--port", str(port)]), f"cannot listen on 127.0.0.1:{port}")
+    one_error_line(runner.invoke(app, ["serve", "--host", "no-such-host.invalid"]), "--host no-such-host.invalid")

@@ -9,6 +9,27 @@ from typing import Optional
 import typer
 
 
+def _port_free_or_fail(host: str, port: int) -> None:
+    """Say in one line that the address is taken (or wrong) before anything starts; uvicorn
+    would log it and exit with code 3."""
+    import socket
+
+    from nl2policy.console import fail
+
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except socket.gaierror as exc:
+        fail(f"--host {host} is not an address this machine can listen on ({exc.strerror})")
+    family, kind, proto, _, address = infos[0]
+    with socket.socket(family, kind, proto) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn binds
+        try:
+            probe.bind(address)
+        except OSError as exc:
+            fail(f"cannot listen on {host}:{port}: {exc.strerror or exc}; is another server running there? "
+                 "choose another --port")
+
+
 def register(app: typer.Typer) -> None:
     @app.command()
     def serve(
@@ -26,6 +47,7 @@ def register(app: typer.Typer) -> None:
 
         if not 1 <= port <= 65535:
             fail(f"--port must be from 1 to 65535, not {port}")
+        _port_free_or_fail(host, port)
         base = out_dir_or_fail(data_dir, "--data-dir") if data_dir else home_or_fail()
         db_path = db or base / "nl2policy.sqlite"
         store_or_fail(db_path)  # a damaged or unwritable database: one line naming it, before anything starts
