@@ -119,3 +119,35 @@ def test_restart_marks_a_run_that_finished_while_orphaned_as_finished(tmp_path):
         first = client.get(f"/api/runs/{done['id']}").json()
         assert first["status"] == "finished" and first["summary"]["steps"] == 512
         assert client.get(f"/api/runs/{cut['id']}").json()["status"] == "interrupted"
+
+
+def test_failure_reason_is_this_attempts_own_line(tmp_path):
+    from nl2policy.app.runs import failure_reason
+
+    log = tmp_path / "log.txt"
+    log.write_text("error: process 12 is still writing the run folder\n")
+    start = log.stat().st_size
+    with log.open("a") as fh:
+        fh.write("Traceback (most recent call last):\n  File \"x.py\", line 1\nRuntimeError: out of memory\n")
+    assert failure_reason(tmp_path, 1, start).startswith("RuntimeError: out of memory (full log: ")
+    assert failure_reason(tmp_path, 2).startswith("process 12 is still writing")  # the whole log: its last error line
+    assert failure_reason(tmp_path / "none", -9).startswith("the training process was stopped by signal 9")
+
+
+def test_a_failed_run_says_why_and_does_not_resume(tmp_path):
+    """A run folder holding another tree's checkpoint makes `optimize` refuse: the run fails with
+    that one line as its error, not an 800-character log tail."""
+    app = create_app(tmp_path / "app.sqlite", tmp_path, translator=None)
+    with TestClient(app, base_url="http://127.0.0.1") as client:
+        store = app.state.store
+        run = store.add_run("taxi", TREE, 512, 0, tmp_path / "runs", None)
+        folder = tmp_path / "runs" / run["id"]
+        folder.mkdir(parents=True)
+        (folder / "state.json").write_text("{}")
+        (folder / "initial_tree.json").write_text(json.dumps({"do": "wait"}))
+        app.state.runs.submit(run["id"])
+        view = wait_until(lambda: (v := client.get(f"/api/runs/{run['id']}").json())["status"] == "failed" and v, 120,
+                          "the run to fail")
+        assert view["error"].startswith(f"{folder} holds a checkpoint of a run from a different tree")
+        assert "Traceback" not in view["error"] and len(view["error"]) < 400
+        assert client.post(f"/api/runs/{run['id']}/resume").status_code == 409

@@ -101,9 +101,9 @@ class RunManager:
                     return
                 run = self._next_queued()
                 self.store.set_run_status(run["id"], "running")
-                proc = self._launch(run)
+                proc, log_start = self._launch(run)
                 self._active[run["id"]] = proc
-            watcher = threading.Thread(target=self._watch, args=(run, proc), daemon=True)
+            watcher = threading.Thread(target=self._watch, args=(run, proc, log_start), daemon=True)
             self._watchers = [w for w in self._watchers if w.is_alive()] + [watcher]
             watcher.start()
 
@@ -111,17 +111,20 @@ class RunManager:
         queued = self.store.list_runs(status="queued", limit=1)
         return queued[0] if queued else None
 
-    def _launch(self, run: dict) -> subprocess.Popen:
+    def _launch(self, run: dict) -> tuple[subprocess.Popen, int]:
+        """Start the run's trainer; also return where this attempt's output starts in log.txt
+        (a resumed run appends to it), so a failure is explained by this attempt's lines."""
         out = Path(run["out_dir"])
         out.mkdir(parents=True, exist_ok=True)
         cmd = [sys.executable, "-m", "nl2policy.app.trainer", str(os.getpid()), str(out), "--",
                "optimize", "--domain", run["domain"],
                "--tree", json.dumps(run["tree"]), "--steps", str(run["steps"]), "--seed", str(run["seed"]),
                "--out", str(out)]
-        log = open(out / "log.txt", "ab")
-        return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        with open(out / "log.txt", "ab") as log:
+            start = log.tell()
+            return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL), start
 
-    def _watch(self, run: dict, proc: subprocess.Popen) -> None:
+    def _watch(self, run: dict, proc: subprocess.Popen, log_start: int = 0) -> None:
         code = proc.wait()
         with self._wake:
             self._active.pop(run["id"], None)
@@ -138,9 +141,9 @@ class RunManager:
         elif stopping:
             self.store.set_run_status(run["id"], "interrupted", error="the server stopped; resume to continue")
         elif code == LOCKED_EXIT:
-            self.store.set_run_status(run["id"], "interrupted", error=failure_reason(out, code))
+            self.store.set_run_status(run["id"], "interrupted", error=failure_reason(out, code, log_start))
         else:
-            self.store.set_run_status(run["id"], "failed", error=failure_reason(out, code))
+            self.store.set_run_status(run["id"], "failed", error=failure_reason(out, code, log_start))
 
     def active(self) -> list[str]:
         with self._lock:
@@ -155,11 +158,15 @@ def _read_summary(out: Path) -> Optional[dict]:
         return None
 
 
-def failure_reason(out: Path, code: int) -> str:
+def failure_reason(out: Path, code: int, log_start: int = 0) -> str:
     """One readable line on why a run failed: the command's own ``error:`` line, else the
-    last exception line of its log, else the exit code. The full log stays in log.txt."""
+    last exception line of its log (from `log_start`: this attempt), else the exit code. The
+    full log stays in log.txt."""
     try:
-        lines = [ln.strip() for ln in (Path(out) / "log.txt").read_text(errors="replace").splitlines() if ln.strip()]
+        with open(Path(out) / "log.txt", "rb") as fh:
+            fh.seek(log_start)
+            text = fh.read().decode(errors="replace")
+        lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
     except OSError:
         lines = []
     said = [ln for ln in lines if ln.lower().startswith("error:")]
