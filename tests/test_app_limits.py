@@ -174,3 +174,14 @@ def test_serve_warns_beyond_loopback_and_passes_the_allowed_hosts(tmp_path, monk
     assert ("warning: listening on" in result.stderr) == warned
     assert seen["run"]["host"] == host
     assert (None if seen["allowed_hosts"] is None else set(seen["allowed_hosts"])) == allowed
+
+
+@pytest.mark.parametrize("method,path,body", [
+    ("post", "/api/translate", {"domain": "d" * 500_000, "description": "go"}),
+    ("post", "/api/validate", {"domain": "taxi", "tree": {"do": "y" * 500_000}}),
+    ("post", "/api/validate", {"domain": "taxi", "tree": {"if": "q" * 500_000, "yes": {"do": "wait"}, "no": {"do": "wait"}}}),
+    ("post", "/api/runs", {"domain": "taxi", "tree": {"do": "wait"}, "spec_id": "s" * 300_000, "steps": "n" * 300_000}),
+])
+def test_errors_never_echo_a_large_input(idle_client, method, path, body):
+    r = getattr(idle_client, method)(path, json=body)
+    assert r.status_code in (404, 422) and len(r.content) < 2000, r.text[:200]

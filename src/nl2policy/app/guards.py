@@ -17,10 +17,12 @@ from typing import Any, Iterable
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
 WILDCARD_HOSTS = ("0.0.0.0", "::", "")
 ECHO_LIMIT = 80  # characters of a rejected value that an error may quote
+MESSAGE_LIMIT = 400  # characters of any one string in an error body
 
 
 def is_loopback(host: str) -> bool:
@@ -118,6 +120,18 @@ def _short(value: Any) -> Any:
     return text if len(text) <= ECHO_LIMIT else f"{text[:ECHO_LIMIT]}… ({len(text):,} characters)"
 
 
+def _trimmed(detail: Any) -> Any:
+    """An error detail with every long string cut: messages quote what was sent (an unknown
+    domain, an unknown action), and what was sent may be a megabyte."""
+    if isinstance(detail, str) and len(detail) > MESSAGE_LIMIT:
+        return f"{detail[:MESSAGE_LIMIT]}… ({len(detail):,} characters)"
+    if isinstance(detail, dict):
+        return {k: _trimmed(v) for k, v in detail.items()}
+    if isinstance(detail, list):
+        return [_trimmed(v) for v in detail]
+    return detail
+
+
 def install(app: FastAPI, allowed_hosts: tuple[str, ...] | None, max_body: int) -> None:
     """Add the guards and the error handlers that keep error bodies small."""
 
@@ -127,6 +141,11 @@ def install(app: FastAPI, allowed_hosts: tuple[str, ...] | None, max_body: int) 
                   | ({"input": _short(e["input"])} if "input" in e and e["input"] is not None else {})
                   for e in exc.errors()[:20]]
         return JSONResponse({"detail": errors}, status_code=422)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        return JSONResponse({"detail": _trimmed(exc.detail)}, status_code=exc.status_code,
+                            headers=getattr(exc, "headers", None))
 
     @app.exception_handler(RecursionError)
     async def too_deep(request: Request, exc: RecursionError) -> JSONResponse:
