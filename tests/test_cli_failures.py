@@ -135,3 +135,9 @@ def test_serve_on_a_port_in_use_or_a_bad_host():
         port = taken.getsockname()[1]
         one_error_line(runner.invoke(app, ["serve", "--port", str(port)]), f"cannot listen on 127.0.0.1:{port}")
     one_error_line(runner.invoke(app, ["serve", "--host", "no-such-host.invalid"]), "--host no-such-host.invalid")
+
+
+def test_error_lines_stay_short_whatever_was_given():
+    line = one_error_line(runner.invoke(app, ["evaluate", "--domain", "taxi", "--tree", json.dumps({"do": "x" * 100_000})]),
+                          "unknown action")
+    assert len(line) < 600 and "characters)" in line

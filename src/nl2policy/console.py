@@ -19,7 +19,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-from nl2policy.limits import MAX_SEED, description_problem, steps_problem, trained_steps
+from nl2policy.limits import MAX_SEED, clipped, description_problem, steps_problem, trained_steps
 
 if TYPE_CHECKING:
     from rich.progress import Progress
@@ -43,8 +43,8 @@ def exit_without_teardown() -> None:
 
 
 def fail(message: str, code: int = 2) -> NoReturn:
-    """Print ``error: message`` as one line on stderr and exit with `code` (2: bad input)."""
-    one_line = " ".join(str(message).split())
+    """Print ``error: message`` as one short line on stderr and exit with `code` (2: bad input)."""
+    one_line = clipped(" ".join(str(message).split()))
     err.print(f"[bold red]error:[/] {escape(one_line)}", highlight=False, soft_wrap=True)
     raise typer.Exit(code)
 

@@ -22,6 +22,15 @@ MAX_WAITING_RUNS = 20
 """Queued runs the server keeps: more would only hold the machine for hours."""
 
 
+MAX_MESSAGE = 400
+"""Characters of any one error message: messages quote what was given, which may be huge."""
+
+
+def clipped(text: str, limit: int = MAX_MESSAGE) -> str:
+    """`text`, or its first `limit` characters and how long it was."""
+    return text if len(text) <= limit else f"{text[:limit]}… ({len(text):,} characters)"
+
+
 def description_problem(text: str) -> str | None:
     """Why a description cannot be translated, or None when it can be."""
     if not text.strip():

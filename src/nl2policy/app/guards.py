@@ -19,14 +19,15 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from nl2policy.limits import clipped
+
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
 WILDCARD_HOSTS = ("0.0.0.0", "::", "")
 ECHO_LIMIT = 80  # characters of a rejected value that an error may quote
-MESSAGE_LIMIT = 400  # characters of any one string in an error body
 
 
 def is_loopback(host: str) -> bool:
-    if host in ("localhost",):
+    if host == "localhost":
         return True
     try:
         return ipaddress.ip_address(host.strip("[]")).is_loopback
@@ -116,15 +117,14 @@ class BodyLimit:
 
 
 def _short(value: Any) -> Any:
-    text = value if isinstance(value, str) else json.dumps(value, default=str)
-    return text if len(text) <= ECHO_LIMIT else f"{text[:ECHO_LIMIT]}… ({len(text):,} characters)"
+    return clipped(value if isinstance(value, str) else json.dumps(value, default=str), ECHO_LIMIT)
 
 
 def _trimmed(detail: Any) -> Any:
     """An error detail with every long string cut: messages quote what was sent (an unknown
     domain, an unknown action), and what was sent may be a megabyte."""
-    if isinstance(detail, str) and len(detail) > MESSAGE_LIMIT:
-        return f"{detail[:MESSAGE_LIMIT]}… ({len(detail):,} characters)"
+    if isinstance(detail, str):
+        return clipped(detail)
     if isinstance(detail, dict):
         return {k: _trimmed(v) for k, v in detail.items()}
     if isinstance(detail, list):
