@@ -236,7 +236,10 @@ def test_pages_fit_a_phone_screen_and_work_offline(server, browser):
         assert width <= 392, f"{path} is {width}px wide on a 390px screen"
     page.goto(with_tree)
     page.wait_for_selector("#tree svg g[data-slot='0']")
+    assert page.locator("#tree-text").is_visible() and "yes:" in page.inner_text("#tree-text")  # the tree as text
     shoot(page, "specify-phone")
+    page.set_viewport_size({"width": 1100, "height": 900})
+    assert page.locator("#tree-text").is_hidden()
     page.set_viewport_size({"width": 1100, "height": 900})
     page.goto(url + "/docs")
     page.wait_for_selector("#endpoints h2")
