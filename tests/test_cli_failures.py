@@ -141,3 +141,11 @@ def test_error_lines_stay_short_whatever_was_given():
     line = one_error_line(runner.invoke(app, ["evaluate", "--domain", "taxi", "--tree", json.dumps({"do": "x" * 100_000})]),
                           "unknown action")
     assert len(line) < 600 and "characters)" in line
+
+
+def test_run_into_a_folder_holding_another_trees_checkpoint(tmp_path):
+    (tmp_path / "taxi").mkdir()
+    (tmp_path / "taxi" / "state.json").write_text("{}")
+    (tmp_path / "taxi" / "initial_tree.json").write_text('{"do": "wait"}')
+    result = runner.invoke(app, ["run", "--domain", "taxi", "--steps", "512", "--out", str(tmp_path)])
+    one_error_line(result, "holds a checkpoint of a run from a different tree")

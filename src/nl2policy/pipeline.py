@@ -51,7 +51,10 @@ def run_pipeline(console: Console, err: Console, domain: str, text: str, steps: 
         err.print(f"[yellow]warning:[/] {warning}")
     with progress_bar() as bar:
         task = bar.add_task(f"{domain}: PPO from the tree", total=trained_steps(domain, steps))
-        summary = optimize_tree(domain, tree, steps, seed, out, progress=lambda n, total: bar.update(task, completed=n))
+        try:
+            summary = optimize_tree(domain, tree, steps, seed, out, progress=lambda n, total: bar.update(task, completed=n))
+        except ValueError as exc:  # --out holds another tree's checkpoint
+            fail(str(exc))
     final = json.loads((out / "final_tree.json").read_text())
     show_tree(console, "after PPO (discretized)", final, domain)
     table = Table(title=f"mean return over {summary['eval_episodes']} evaluation episodes")
