@@ -35,7 +35,8 @@ import nl2policy.cli
 t1 = time.perf_counter()
 from nl2policy.language import translate as tr
 import torch
-torch.set_num_threads(1)  # as the translate command does
+if THREADS_HERE:
+    torch.set_num_threads(THREADS_HERE)  # 1: as the translate command does
 t2 = time.perf_counter()
 tr.get_model("taxi")
 t3 = time.perf_counter()
@@ -88,8 +89,10 @@ def main() -> None:
         for _ in range(args.runs):
             for name, (cmd, cmd_env) in commands.items():
                 times[name].append(timed(cmd, cmd_env))
-        phases = subprocess.run([sys.executable, "-c", PHASES.replace("TEXT_HERE", repr(TEXT + " (phases)"))], env=env,
-                                capture_output=True, text=True, check=True).stdout
+        phases = {threads: subprocess.run([sys.executable, "-c", PHASES.replace("TEXT_HERE", repr(TEXT + " (phases)"))
+                                           .replace("THREADS_HERE", str(threads))], env=env,
+                                          capture_output=True, text=True, check=True).stdout
+                  for threads in (1, 0)}
     finally:
         shutil.rmtree(home, ignore_errors=True)
     med = {k: statistics.median(w for w, _, _ in v) for k, v in times.items()}
@@ -112,8 +115,12 @@ def main() -> None:
         "",
         f"first translate in a new data folder (builds MiniLM's saved trace, once): {first:.2f} s, peak RSS {first_mib:.0f} MiB",
         "",
-        "where a cold translate's time goes (one fresh process, phases timed inside it):",
-        phases.rstrip(),
+        "where a cold translate's time goes (one fresh process, phases timed inside it), on one torch thread as",
+        "the translate command runs:",
+        phases[1].rstrip(),
+        "",
+        f"the same at torch's default of {os.cpu_count()} threads (another fresh process), for comparison:",
+        phases[0].rstrip(),
     ]
     report = "\n".join(lines) + "\n"
     print(report)

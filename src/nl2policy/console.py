@@ -33,9 +33,10 @@ owns_process = False
 
 
 def exit_without_teardown() -> None:
-    """End a finished command at once, skipping the interpreter's teardown of torch (~0.5 s of
-    a 2 s cold translation, benchmarks/cold_translate.py). Only when the command is the whole
-    process, everything is written and flushed, and the command has nothing left to clean up."""
+    """End a finished command at once, skipping the interpreter's teardown of torch, a part of a
+    cold translation's wall time that the user waits for and that does nothing for them. Only
+    when the command is the whole process, everything is written and flushed, and the command
+    has nothing left to clean up."""
     if owns_process:
         sys.stdout.flush()
         sys.stderr.flush()

@@ -82,8 +82,9 @@ def translate_cmd(
     from nl2policy.trees import to_text
 
     # One torch thread, as the server and the experiments translate: a single short text gains
-    # nothing from more, and starting torch's thread pool made a cold translation's first pass
-    # 0.8-1.3 s instead of 0.08 s on a busy 2-core machine (benchmarks/cold_translate.py).
+    # nothing from more, and starting torch's thread pool for it made the first pass of a cold
+    # translation many times slower on a busy 2-core machine (the last phase that
+    # benchmarks/cold_translate.py prints).
     torch.set_num_threads(1)
     try:
         result = translate(domain, text, name)
