@@ -132,6 +132,12 @@ def test_collect_build_submit_and_export(server, browser):
     page.click("#submit")
     page.wait_for_function("document.querySelector('#error').textContent.length > 0")
     page.fill("#description", "With a passenger head for the airport; without one, go to the city.")
+    # back and forward (or a reload) keep the tree being built
+    page.goto(url + "/")
+    page.go_back()
+    page.wait_for_selector(".slot[data-slot='2'].action")
+    assert page.inner_text(".slot[data-slot='1'] .slot-text") == "Drive to the airport"
+    assert page.input_value("#description").startswith("With a passenger")
     shoot(page, "collect")
     page.click("#submit")
     page.wait_for_function("document.querySelector('#ok').textContent.startsWith('Thank you') || "
