@@ -2,6 +2,7 @@
 database file, or a read-only data folder, gives one clear line naming the file and what to do,
 and the file is left exactly as it was (never silently replaced by a new, empty database)."""
 
+import json
 import os
 import sqlite3
 import subprocess
@@ -101,3 +102,14 @@ def test_read_only_home_names_the_path(tmp_path, home_inside):
         assert proc.returncode == 2, proc.stderr
         lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
         assert len(lines) == 1 and lines[0].startswith("error: cannot") and str(home) in lines[0], proc.stderr
+
+
+def test_translate_works_when_the_data_folder_cannot_be_made(tmp_path):
+    """The shipped translator needs no data folder; an unwritable one only means nothing is cached."""
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    env = {**os.environ, "NL2POLICY_HOME": str(folder / "sub")}
+    proc = run_with_read_only(folder, [sys.executable, "-m", "nl2policy.cli", "translate", "--domain", "taxi", "--json",
+                                       "If I have a passenger go to the airport, else go to the city"], env)
+    assert proc.returncode == 0, proc.stderr[-1000:]
+    assert "Traceback" not in proc.stderr and json.loads(proc.stdout)["tree"]["if"] == "has_passenger"

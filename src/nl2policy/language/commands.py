@@ -86,9 +86,11 @@ def translate_cmd(
     # translation many times slower on a busy 2-core machine (the last phase that
     # benchmarks/cold_translate.py prints).
     torch.set_num_threads(1)
+    from nl2policy.paths import HomeError
+
     try:
         result = translate(domain, text, name)
-    except EmptyDescription as exc:
+    except (EmptyDescription, HomeError) as exc:  # HomeError: no model, and nowhere to train one
         fail(str(exc))
     if json_out:
         print(json.dumps(result.to_json()))

@@ -124,7 +124,10 @@ def saved_forward(layers: int = LAYERS) -> torch.nn.Module:
     of a cold translation's seconds. The saved trace is the same module (the same operations and
     int8 weights, bit for bit: tests/test_translate_cold.py), and loading it needs torch alone.
     An eager fallback (the trace failed) is not saved."""
-    path = saved_forward_path(layers)
+    try:
+        path = saved_forward_path(layers)
+    except OSError:  # no data folder to keep it in (HomeError): build it for this process only
+        return _forward(layers)
     if path.is_file():
         try:
             with warnings.catch_warnings(), _native_stderr_silenced():
