@@ -35,7 +35,7 @@ def fake_translator(domain, text):
 @pytest.fixture
 def client(tmp_path):
     app = create_app(tmp_path / "app.sqlite", tmp_path, translator=fake_translator, results_dir=tmp_path / "results")
-    with TestClient(app) as c:
+    with TestClient(app, base_url="http://127.0.0.1") as c:
         yield c
 
 
@@ -161,7 +161,7 @@ def test_baseline_curves_are_medians_over_seeds(tmp_path):
         rows = ["episode,step,return,rolling_mean_100"] + [f"{i},{i * 100},{level},{level * i / 10:.4f}" for i in range(1, 11)]
         (d / "curve.csv").write_text("\n".join(rows) + "\n")
     app = create_app(tmp_path / "a.sqlite", tmp_path, translator=fake_translator, results_dir=tmp_path / "results")
-    with TestClient(app) as c:
+    with TestClient(app, base_url="http://127.0.0.1") as c:
         body = c.get("/api/baselines/taxi").json()
         assert set(body["curves"]) == {"MLP"}
         last_step, last_value = body["curves"]["MLP"][-1]

@@ -20,7 +20,8 @@ def wait_for(client, run_id, states, timeout=180):
 
 
 def make_client(tmp_path):
-    return TestClient(create_app(tmp_path / "app.sqlite", tmp_path, translator=None, results_dir=tmp_path / "results"))
+    return TestClient(create_app(tmp_path / "app.sqlite", tmp_path, translator=None, results_dir=tmp_path / "results"),
+                      base_url="http://127.0.0.1")
 
 
 def test_run_finishes_with_curve_final_tree_and_download(tmp_path):

@@ -1,6 +1,8 @@
 """End to end in a real browser (Playwright driving Debian's chromium, headless): describe,
-see the tree, edit a node, optimize briefly, see the curve and the final tree; build and
-submit a tree on the Collect page and find it in the export.
+see the tree, edit a node, optimize briefly, see the curve, the readable result and the final
+tree; the Optimize page's live run list and cancel; the Specify page's domain switch, edit menu
+and back/forward; build and submit a tree on the Collect page and find it in the export; the
+pages on a phone-sized screen and the offline API reference.
 
 Set NL2POLICY_SCREENSHOTS=docs to save a screenshot of each page there (``make screenshots``).
 """
@@ -89,22 +91,37 @@ def test_specify_edit_optimize(server, browser):
     page.fill("#steps", "1024")
     page.click("#optimize")
     page.wait_for_url("**/optimize?run=*")
+    page.set_viewport_size({"width": 1280, "height": 900})
     page.wait_for_function("document.querySelector('#status').textContent === 'finished'", timeout=240_000)
     page.wait_for_selector("#curve polyline[data-name='run']")
     page.wait_for_selector("#final svg")
     assert page.locator("#initial svg").count() == 1
     assert page.locator("#download").is_visible()
+    # a readable result, not a JSON dump: returns before/after, the change, the time, a verdict
+    assert page.locator("#result").is_visible() and not page.locator("#summary").is_visible()
+    for cell in ("#before", "#after", "#change"):
+        float(page.inner_text(cell).replace("+", ""))
+    assert "steps" in page.inner_text("#took") and page.inner_text("#verdict").strip()
+    assert page.inner_text("#progress").endswith("1,024 of 1,024 steps")
+    # the legend sits below the plot, outside the SVG, so it cannot cover a curve
+    assert page.locator("#curve svg text", has_text="this run").count() == 0
+    assert page.locator("#legend span", has_text="this run").count() == 1
     shoot(page, "optimize")
     page.close()
 
 
 def test_collect_build_submit_and_export(server, browser):
     url, base = server
-    page = browser.new_page(viewport={"width": 1100, "height": 1000})
+    page = browser.new_page(viewport={"width": 1100, "height": 1700})  # the drag's source and target both in view
     page.goto(url + "/collect")
     page.wait_for_selector("#palette span")
     page.select_option("#domain", "taxi")
     page.wait_for_selector("#palette span[data-id='has_passenger']")
+    # the briefing is formatted text, and the grid says which box answers yes and which no
+    assert page.locator("#briefing b", has_text="airport").count() >= 1 and page.locator("#briefing li").count() >= 6
+    assert "**" not in page.inner_text("#briefing")
+    assert page.inner_text(".slot[data-slot='1'] .answer-tag").lower() == "if yes"
+    assert page.inner_text(".slot[data-slot='2'] .answer-tag").lower() == "if no"
     page.fill("#writer", "browser-test")
     page.click(".slot[data-slot='0']")
     page.click("#palette span[data-id='has_passenger']")
@@ -115,9 +132,17 @@ def test_collect_build_submit_and_export(server, browser):
     page.click("#submit")
     page.wait_for_function("document.querySelector('#error').textContent.length > 0")
     page.fill("#description", "With a passenger head for the airport; without one, go to the city.")
+    # back and forward (or a reload) keep the tree being built
+    page.goto(url + "/")
+    page.go_back()
+    page.wait_for_selector(".slot[data-slot='2'].action")
+    assert page.inner_text(".slot[data-slot='1'] .slot-text") == "Drive to the airport"
+    assert page.input_value("#description").startswith("With a passenger")
     shoot(page, "collect")
     page.click("#submit")
-    page.wait_for_function("document.querySelector('#ok').textContent.startsWith('Thank you')")
+    page.wait_for_function("document.querySelector('#ok').textContent.startsWith('Thank you') || "
+                           "document.querySelector('#error').textContent.length > 0")
+    assert page.inner_text("#error") == ""
     page.close()
 
     from nl2policy.cli import app
@@ -127,3 +152,104 @@ def test_collect_build_submit_and_export(server, browser):
     assert res.exit_code == 0, res.output
     rows = [json.loads(line) for line in out.read_text().splitlines()]
     assert {"writer": "browser-test", "tree": {"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_city"}}}.items() <= rows[-1].items()
+
+
+def test_optimize_page_lists_runs_live_and_cancels(server, browser):
+    url, _ = server
+    import urllib.request
+
+    def post(path, body=None):
+        req = urllib.request.Request(url + path, method="POST", data=json.dumps(body or {}).encode(),
+                                     headers={"Content-Type": "application/json"})
+        with urllib.request.urlopen(req, timeout=30) as res:
+            return json.loads(res.read())
+
+    page = browser.new_page(viewport={"width": 1280, "height": 900})
+    page.goto(url + "/optimize")
+    page.wait_for_load_state("networkidle")
+    long = post("/api/runs", {"domain": "taxi", "steps": 100_000, "seed": 3,
+                              "tree": {"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "wait"}}})
+    # the list shows the new run without a reload
+    page.wait_for_selector(f"#runs li[data-run='{long['id']}']", timeout=10_000)
+    page.click(f"#runs li[data-run='{long['id']}'] a")
+    page.wait_for_function("document.querySelector('#status').textContent === 'running'", timeout=240_000)
+    page.wait_for_function("/of 100,352 steps · about/.test(document.querySelector('#progress').textContent)", timeout=120_000)
+    assert page.locator("#resume").is_hidden() and page.locator("#cancel").is_visible()
+    page.click("#cancel")
+    page.wait_for_function("document.querySelector('#status').textContent === 'cancelled'", timeout=30_000)
+    page.wait_for_selector(f"#runs li[data-run='{long['id']}'][data-status='cancelled']", timeout=10_000)
+    assert page.locator("#resume").is_visible() and page.locator("#cancel").is_hidden()
+    page.on("dialog", lambda dialog: dialog.accept())
+    page.click("#delete")
+    page.wait_for_selector(f"#runs li[data-run='{long['id']}']", state="detached", timeout=10_000)
+    assert page.locator("#run-card").is_hidden()
+    page.close()
+
+
+def test_specify_domain_switch_edit_menu_and_back_forward(server, browser):
+    url, _ = server
+    page = browser.new_page(viewport={"width": 1100, "height": 900})
+    page.goto(url + "/")
+    page.fill("#description", DESCRIPTION)
+    page.click("#translate")
+    page.wait_for_selector("#tree svg g[data-slot='0']", timeout=120_000)
+    assert "?spec=" in page.url
+    root = page.get_attribute("#tree g[data-slot='0']", "data-id")
+
+    # the edit menu offers only what the rules allow, and speaks of questions and answers
+    page.click("#tree g[data-slot='1']")
+    assert root not in page.eval_on_selector_all("#edit-choice option", "os => os.map(o => o.value)")
+    place = page.inner_text("#edit-place")
+    assert "answer to" in place and "Slot" not in place and "root" not in place
+    # a new question keeps this box's action on its "yes" side and gets another one on "no"
+    before = page.get_attribute("#tree g[data-slot='1']", "data-id")
+    question = page.eval_on_selector("#edit-choice optgroup[label='Ask a question'] option", "o => o.value")
+    page.select_option("#edit-choice", question)
+    page.click("#apply-edit")
+    page.wait_for_selector("#tree g[data-slot='3']")
+    assert page.get_attribute("#tree g[data-slot='3']", "data-id") == before
+    assert page.get_attribute("#tree g[data-slot='4']", "data-id") not in (before, None)
+    assert page.inner_text("#edit-error") == ""
+
+    # back and forward keep the tree
+    page.goto(url + "/collect")
+    page.go_back()
+    page.wait_for_selector("#tree svg g[data-slot='3']", timeout=30_000)
+    assert page.get_attribute("#tree g[data-slot='3']", "data-id") == before
+    assert page.input_value("#description") == DESCRIPTION
+
+    # another domain: the taxi tree is gone
+    page.select_option("#domain", "highway")
+    assert page.locator("#result").is_hidden() and page.inner_html("#tree") == ""
+    page.close()
+
+
+def test_pages_fit_a_phone_screen_and_work_offline(server, browser):
+    url, _ = server
+    page = browser.new_page(viewport={"width": 390, "height": 844})
+    outside = []
+    page.on("request", lambda req: outside.append(req.url) if not req.url.startswith(url) else None)
+    page.goto(url + "/")
+    page.fill("#description", DESCRIPTION)
+    page.click("#translate")
+    page.wait_for_selector("#tree svg g[data-slot='0']", timeout=120_000)
+    with_tree = page.url
+    for path in ("/", "/optimize", "/collect"):
+        if path != "/":
+            page.goto(url + path)
+            page.wait_for_load_state("networkidle")
+        width = page.evaluate("document.scrollingElement.scrollWidth")
+        assert width <= 392, f"{path} is {width}px wide on a 390px screen"
+    page.goto(with_tree)
+    page.wait_for_selector("#tree svg g[data-slot='0']")
+    assert page.locator("#tree-text").is_visible() and "yes:" in page.inner_text("#tree-text")  # the tree as text
+    shoot(page, "specify-phone")
+    page.set_viewport_size({"width": 1100, "height": 900})
+    assert page.locator("#tree-text").is_hidden()
+    page.set_viewport_size({"width": 1100, "height": 900})
+    page.goto(url + "/docs")
+    page.wait_for_selector("#endpoints h2")
+    assert page.locator("#endpoints h2", has_text="POST /api/translate").count() == 1
+    assert page.evaluate("document.querySelector('link[rel=icon]').href").endswith("favicon.svg")
+    assert outside == []  # nothing loaded from the internet
+    page.close()

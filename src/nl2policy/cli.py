@@ -1,4 +1,9 @@
-"""The ``nl2policy`` command line. Each command is a thin shell over a library function."""
+"""The ``nl2policy`` command line. Each command is a thin shell over a library function.
+
+The shared terminal helpers (consoles, ``fail``, argument checks) live in ``nl2policy.console``
+and are re-exported here for the area ``commands`` modules. Heavy libraries are imported inside
+the commands that use them, so ``--help`` and ``translate`` start quickly.
+"""
 
 from __future__ import annotations
 
@@ -8,41 +13,14 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from nl2policy.domains import DOMAINS, get_domain
-from nl2policy.trees import TreeError, load_tree_arg
+from nl2policy.console import (console, description_or_fail, domain_or_fail, err, fail, out_dir_or_fail, progress_bar,
+                               seed_or_fail, steps_or_fail, tree_or_fail)
+from nl2policy.domains import DOMAINS
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="Plain-English robot policies as readable, trainable decision trees.")
-console = Console()
-err = Console(stderr=True)
 
-
-def fail(message: str, code: int = 2) -> None:
-    err.print(f"[bold red]error:[/] {message}", highlight=False)
-    raise typer.Exit(code)
-
-
-def progress_bar(**kwargs) -> Progress:
-    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                    console=err, transient=True, **kwargs)
-
-
-def domain_or_fail(name: str):
-    try:
-        return get_domain(name)
-    except KeyError as exc:
-        fail(str(exc.args[0]))
-
-
-def tree_or_fail(domain: str, arg: str):
-    """A tree from a CLI argument (inline JSON or a file), or exit 2 naming the problem."""
-    d = domain_or_fail(domain)
-    try:
-        return load_tree_arg(arg, d.vocab)
-    except TreeError as exc:
-        fail(f"bad tree: {exc}")
+__all__ = ["app", "console", "err", "fail", "progress_bar", "domain_or_fail", "tree_or_fail", "main"]
 
 
 @app.command()
@@ -55,6 +33,7 @@ def evaluate(
     """Run a tree as a policy; print {"mean_return", "stderr", "episodes"} as JSON."""
     from nl2policy.policy.rollout import evaluate as run_eval, tree_policy
 
+    seed_or_fail(seed)
     parsed = tree_or_fail(domain, tree)
     with progress_bar() as bar:
         task = bar.add_task(f"{domain} episodes", total=episodes)
@@ -68,6 +47,7 @@ def compare(episodes: int = typer.Option(10, min=1), seed: int = typer.Option(0)
     """The most common corpus trees against the random policy (and taxi's optimum), per domain."""
     from nl2policy.compare import run_compare
 
+    seed_or_fail(seed)
     run_compare(console, episodes, seed)
 
 
@@ -75,7 +55,7 @@ def compare(episodes: int = typer.Option(10, min=1), seed: int = typer.Option(0)
 def run(
     text: Optional[str] = typer.Argument(None, help="What the robot should do, in plain English (default: an example)"),
     domain: str = typer.Option("taxi", help=f"One of: {', '.join(DOMAINS)}"),
-    steps: int = typer.Option(10_000, min=256, help="PPO env steps"),
+    steps: int = typer.Option(10_000, help="PPO env steps (whole rollouts: rounded up to a multiple of 512 for taxi, 256 for highway)"),
     seed: int = typer.Option(0),
     out: Path = typer.Option(Path("runs/main"), help="Output folder for trees, curve and summary"),
 ) -> None:
@@ -83,10 +63,10 @@ def run(
     from nl2policy.pipeline import EXAMPLES, run_pipeline
 
     domain_or_fail(domain)
-    text = EXAMPLES[domain] if text is None else text
-    if not text.strip():
-        fail("the description is empty: say what the robot should do")
-    run_pipeline(console, err, domain, text, steps, seed, out / domain)
+    text = description_or_fail(EXAMPLES[domain] if text is None else text)
+    seed_or_fail(seed)
+    steps_or_fail(domain, steps)
+    run_pipeline(console, err, domain, text, steps, seed, out_dir_or_fail(out / domain))
     console.print("\nTo describe, edit and optimize policies in the browser: [bold]make serve[/] "
                   "(or `.venv/bin/nl2policy serve`), then open http://127.0.0.1:8000/")
 
@@ -104,6 +84,8 @@ def corpus_returns_cmd(
     from nl2policy.report import write_returns_table
 
     domain_or_fail(domain)
+    seed_or_fail(seed)
+    out_dir_or_fail(out)
     with progress_bar() as bar:
         task = bar.add_task(f"{domain}: screening corpus trees", total=None)
         rows = corpus_returns(domain, screen_episodes, episodes, seed,
@@ -131,8 +113,13 @@ _register_area_commands()
 
 
 def main() -> None:  # pragma: no cover - console entry
+    """The ``nl2policy`` executable: the command line owns the process (see
+    ``console.exit_without_teardown``)."""
+    from nl2policy import console as terminal
+
+    terminal.owns_process = True
     app()
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(app())
+    sys.exit(main())

@@ -35,19 +35,26 @@ def show_tree(console: Console, title: str, tree_json: dict, domain: str) -> Non
 
 
 def run_pipeline(console: Console, err: Console, domain: str, text: str, steps: int, seed: int, out: Path) -> dict:
-    from nl2policy.cli import progress_bar
-    from nl2policy.language.translate import translate
+    from nl2policy.console import fail, progress_bar
+    from nl2policy.language.translate import EmptyDescription, translate
+    from nl2policy.limits import trained_steps
     from nl2policy.policy.optimize import optimize_tree
 
     console.print(Panel(text, title=f"description ({domain})", expand=False))
-    translation = translate(domain, text)
+    try:
+        translation = translate(domain, text)
+    except EmptyDescription as exc:
+        fail(str(exc))
     tree: Tree = translation.tree
     show_tree(console, f"translated tree · confidence {translation.confidence:.0%}", json.loads(json.dumps(translation.to_json()["tree"])), domain)
     for warning in translation.warnings:
         err.print(f"[yellow]warning:[/] {warning}")
     with progress_bar() as bar:
-        task = bar.add_task(f"{domain}: PPO from the tree", total=steps)
-        summary = optimize_tree(domain, tree, steps, seed, out, progress=lambda n, total: bar.update(task, completed=n))
+        task = bar.add_task(f"{domain}: PPO from the tree", total=trained_steps(domain, steps))
+        try:
+            summary = optimize_tree(domain, tree, steps, seed, out, progress=lambda n, total: bar.update(task, completed=n))
+        except ValueError as exc:  # --out holds another tree's checkpoint
+            fail(str(exc))
     final = json.loads((out / "final_tree.json").read_text())
     show_tree(console, f"after PPO (returned: {summary['returned']})", final, domain)
     table = Table(title=f"mean return over {summary['eval_episodes']} evaluation episodes")

@@ -5,19 +5,28 @@ output folder under the app's data directory: the app shows exactly what the CLI
 the CLI's checkpoints make a run resumable, and a crash in training cannot take the server
 down. The queue lives in SQLite, so a restart loses nothing: finished runs stay finished,
 and runs that were going are marked interrupted, ready to resume.
+
+The child runs under ``nl2policy.app.trainer``: it dies with the server and holds its folder's
+lock, so a restart never meets an orphan still writing a folder it would resume. On start, the
+database is reconciled with the folders: a run whose summary is on disk finished (perhaps while
+orphaned by an older version) and is recorded so.
 """
 
 from __future__ import annotations
 
 import csv
 import json
+import os
+import re
 import subprocess
 import sys
 import threading
 from pathlib import Path
 from typing import Optional
 
+from nl2policy.app.runlock import holder
 from nl2policy.app.store import Store
+from nl2policy.app.trainer import LOCKED_EXIT
 
 
 class RunManager:
@@ -27,13 +36,29 @@ class RunManager:
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._active: dict[str, subprocess.Popen] = {}
+        self._cancelling: set[str] = set()
         self._watchers: list[threading.Thread] = []
         self._stopping = False
         self._thread = threading.Thread(target=self._loop, name="run-manager", daemon=True)
 
     def start(self) -> None:
-        self.store.mark_unfinished_interrupted()
+        self.reconcile()
         self._thread.start()
+
+    def reconcile(self) -> None:
+        """After a restart no run of ours is going: record what the folders say happened."""
+        for status in ("running", "queued"):
+            for run in self.store.list_runs(status=status, limit=10_000):
+                out = Path(run["out_dir"])
+                summary = _read_summary(out)
+                pid = holder(out)
+                if summary is not None and pid is None:
+                    self.store.set_run_status(run["id"], "finished", summary=summary)
+                elif pid is not None:
+                    self.store.set_run_status(run["id"], "interrupted", error=f"process {pid} from an earlier server "
+                                              "is still writing this run; it can be resumed once that process ends")
+                else:
+                    self.store.set_run_status(run["id"], "interrupted", error="the server stopped; resume to continue")
 
     def stop(self) -> None:
         with self._wake:
@@ -52,6 +77,21 @@ class RunManager:
         with self._wake:
             self._wake.notify_all()
 
+    def cancel(self, run_id: str) -> bool:
+        """Stop a queued or running run (its checkpoint stays, so it can be resumed); False when
+        it was neither."""
+        with self._wake:
+            run = self.store.get_run(run_id)
+            if run is None or run["status"] not in ("queued", "running"):
+                return False
+            proc = self._active.get(run_id)
+            if proc is None:
+                self.store.set_run_status(run_id, "cancelled", error="cancelled before it started")
+                return True
+            self._cancelling.add(run_id)
+        proc.terminate()
+        return True
+
     def _loop(self) -> None:
         while True:
             with self._wake:
@@ -61,9 +101,9 @@ class RunManager:
                     return
                 run = self._next_queued()
                 self.store.set_run_status(run["id"], "running")
-                proc = self._launch(run)
+                proc, log_start = self._launch(run)
                 self._active[run["id"]] = proc
-            watcher = threading.Thread(target=self._watch, args=(run, proc), daemon=True)
+            watcher = threading.Thread(target=self._watch, args=(run, proc, log_start), daemon=True)
             self._watchers = [w for w in self._watchers if w.is_alive()] + [watcher]
             watcher.start()
 
@@ -71,34 +111,75 @@ class RunManager:
         queued = self.store.list_runs(status="queued", limit=1)
         return queued[0] if queued else None
 
-    def _launch(self, run: dict) -> subprocess.Popen:
+    def _launch(self, run: dict) -> tuple[subprocess.Popen, int]:
+        """Start the run's trainer; also return where this attempt's output starts in log.txt
+        (a resumed run appends to it), so a failure is explained by this attempt's lines."""
         out = Path(run["out_dir"])
         out.mkdir(parents=True, exist_ok=True)
-        cmd = [sys.executable, "-m", "nl2policy.cli", "optimize", "--domain", run["domain"],
+        cmd = [sys.executable, "-m", "nl2policy.app.trainer", str(os.getpid()), str(out), "--",
+               "optimize", "--domain", run["domain"],
                "--tree", json.dumps(run["tree"]), "--steps", str(run["steps"]), "--seed", str(run["seed"]),
                "--out", str(out)]
-        log = open(out / "log.txt", "ab")
-        return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        with open(out / "log.txt", "ab") as log:
+            start = log.tell()
+            return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL), start
 
-    def _watch(self, run: dict, proc: subprocess.Popen) -> None:
+    def _watch(self, run: dict, proc: subprocess.Popen, log_start: int = 0) -> None:
         code = proc.wait()
         with self._wake:
             self._active.pop(run["id"], None)
             stopping = self._stopping
+            cancelled = run["id"] in self._cancelling
+            self._cancelling.discard(run["id"])
             self._wake.notify_all()
         out = Path(run["out_dir"])
-        summary_path = out / "summary.json"
-        if code == 0 and summary_path.is_file():
-            self.store.set_run_status(run["id"], "finished", summary=json.loads(summary_path.read_text()))
+        summary = _read_summary(out)
+        if code == 0 and summary is not None:
+            self.store.set_run_status(run["id"], "finished", summary=summary)
+        elif cancelled:
+            self.store.set_run_status(run["id"], "cancelled", error="cancelled; resume to continue from its last checkpoint")
         elif stopping:
             self.store.set_run_status(run["id"], "interrupted", error="the server stopped; resume to continue")
+        elif code == LOCKED_EXIT:
+            self.store.set_run_status(run["id"], "interrupted", error=failure_reason(out, code, log_start))
         else:
-            tail = (out / "log.txt").read_text(errors="replace")[-800:] if (out / "log.txt").exists() else ""
-            self.store.set_run_status(run["id"], "failed", error=f"exit code {code}: {tail}")
+            self.store.set_run_status(run["id"], "failed", error=failure_reason(out, code, log_start))
 
     def active(self) -> list[str]:
         with self._lock:
             return list(self._active)
+
+
+def _read_summary(out: Path) -> Optional[dict]:
+    """summary.json, written last by a run that completed; None if absent or unreadable."""
+    try:
+        return json.loads((Path(out) / "summary.json").read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+
+
+def failure_reason(out: Path, code: int, log_start: int = 0) -> str:
+    """One readable line on why a run failed: the command's own ``error:`` line, else the
+    last exception line of its log (from `log_start`: this attempt), else the exit code. The
+    full log stays in log.txt."""
+    try:
+        with open(Path(out) / "log.txt", "rb") as fh:
+            fh.seek(log_start)
+            text = fh.read().decode(errors="replace")
+        lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    except OSError:
+        lines = []
+    said = [ln for ln in lines if ln.lower().startswith("error:")]
+    raised = [ln for ln in lines if re.match(r"^[A-Za-z_.]*(Error|Exception|Interrupt)\b", ln)]
+    if said:
+        reason = said[-1][len("error:"):].strip()
+    elif raised:
+        reason = raised[-1]
+    elif code < 0:
+        reason = f"the training process was stopped by signal {-code}"
+    else:
+        reason = f"the training process exited with code {code}"
+    return f"{reason[:300]} (full log: {Path(out) / 'log.txt'})"
 
 
 def read_curve(out_dir: Path, domain: str) -> list[dict]:

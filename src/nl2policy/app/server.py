@@ -5,24 +5,31 @@ three pages (Specify, Optimize, Collect) served as static HTML + JS that call it
 from __future__ import annotations
 
 import json
+import shutil
+import sqlite3
+import threading
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any, Callable, Optional
 
-from fastapi import FastAPI, HTTPException
-from fastapi.responses import FileResponse, JSONResponse, Response
+from fastapi import FastAPI, HTTPException, Request
+from fastapi.openapi.docs import get_swagger_ui_html
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
+from nl2policy.app import guards, outcome
+from nl2policy.app.places import place
 from nl2policy.app.baselines import baseline_curves
+from nl2policy.app.runlock import holder
 from nl2policy.app.runs import RunManager, read_curve
-from nl2policy.app.store import Store
+from nl2policy.app.store import WAITING, Store
 from nl2policy.domains import DOMAINS, get_domain
+from nl2policy.limits import (MAX_BODY_BYTES, MAX_DESCRIPTION, MAX_SEED, MAX_STEPS, MAX_WAITING_RUNS, description_problem,
+                              steps_problem)
 from nl2policy.trees import GRID_SLOTS, TreeError, from_grid, parse_tree, to_grid, to_svg, to_text, tree_to_json
 
 STATIC = Path(__file__).resolve().parent / "static"
-MAX_DESCRIPTION = 5000  # characters; the corpus's longest is about 1,500
-MAX_STEPS = 200_000
 LOW_CONFIDENCE = 0.5
 
 
@@ -40,8 +47,8 @@ class TreeIn(BaseModel):
 class RunIn(BaseModel):
     domain: str
     tree: Any
-    steps: int = Field(20_000, ge=256, le=MAX_STEPS)
-    seed: int = Field(0, ge=0)
+    steps: int = Field(20_000, ge=1, le=MAX_STEPS)
+    seed: int = Field(0, ge=0, le=MAX_SEED)
     spec_id: Optional[str] = None
 
 
@@ -67,7 +74,9 @@ def _parse(domain: str, tree: Any = None, grid: Optional[list] = None):
             raise TreeError("give a tree or a grid", "request")
         return parse_tree(tree, d.vocab)
     except TreeError as exc:
-        raise HTTPException(422, {"message": exc.message, "where": exc.where, "error": str(exc)}) from exc
+        words = place(exc.where, d.vocab, tree=tree, grid=grid)
+        raise HTTPException(422, {"message": exc.message, "where": exc.where, "place": words,
+                                  "error": f"{words}: {exc.message}"}) from exc
 
 
 def _tree_view(domain: str, tree, node_confidence: Optional[dict] = None) -> dict:
@@ -84,19 +93,28 @@ def changed_slots(before: list, after: list) -> list[int]:
 
 
 def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = None,
-               results_dir: Optional[Path] = None, max_parallel_runs: int = 1) -> FastAPI:
-    """Build the app. `translator(domain, text)` defaults to the trained translator."""
+               results_dir: Optional[Path] = None, max_parallel_runs: int = 1,
+               allowed_hosts: Optional[tuple[str, ...]] = guards.LOOPBACK_HOSTS,
+               max_waiting_runs: int = MAX_WAITING_RUNS) -> FastAPI:
+    """Build the app. `translator(domain, text)` defaults to the trained translator.
+    `allowed_hosts`: the Host header values served (None: any), see `guards`. Raises
+    `store.StoreError` for a database that cannot be used."""
     store = Store(db_path)
     runs = RunManager(store, max_parallel=max_parallel_runs)
     runs_dir = Path(data_dir) / "runs"
     results = results_dir or Path.cwd() / "results"
+    # One translation at a time: the first one imports transformers and loads the model, which
+    # is not safe to do from two threads at once (concurrent first requests failed with an
+    # ImportError), and a translation takes ~20 ms, so queueing them costs nothing.
+    translate_lock = threading.Lock()
 
     def translate(domain: str, text: str):
         if translator is not None:
             return translator(domain, text)
         from nl2policy.language.translate import translate as real
 
-        return real(domain, text)
+        with translate_lock:
+            return real(domain, text)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
@@ -104,9 +122,15 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
         yield
         runs.stop()
 
-    app = FastAPI(title="nl2policy", version="0.1.0", lifespan=lifespan,
+    app = FastAPI(title="nl2policy", version="0.1.0", lifespan=lifespan, docs_url=None, redoc_url=None,
                   description="Describe a policy in plain English, inspect and edit its tree, optimize it with PPO.")
     app.state.store, app.state.runs = store, runs
+    guards.install(app, allowed_hosts, MAX_BODY_BYTES)
+
+    @app.exception_handler(sqlite3.Error)
+    async def database_error(request: Request, exc: sqlite3.Error) -> JSONResponse:
+        return JSONResponse({"detail": f"the database {store.path} failed ({exc}); check the disk and the file, "
+                                       "then restart the server"}, status_code=503)
 
     # --- domains ----------------------------------------------------------------------------
     @app.get("/api/domains")
@@ -129,9 +153,18 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
     @app.post("/api/translate")
     def translate_endpoint(body: TranslateIn) -> dict:
         _domain(body.domain)
-        if not body.description.strip():
-            raise HTTPException(422, {"message": "the description is empty: say what the robot should do", "where": "description"})
-        result = translate(body.domain, body.description)
+        problem = description_problem(body.description)
+        if problem:
+            raise HTTPException(422, {"message": problem, "where": "description"})
+        try:
+            result = translate(body.domain, body.description)
+        except ValueError as exc:  # the translator's EmptyDescription: no words in it ("?!.,;")
+            from nl2policy.language.translate import EmptyDescription
+
+            if not isinstance(exc, EmptyDescription):
+                raise
+            raise HTTPException(422, {"message": "the description has no words to translate: say what the robot "
+                                                 "should do", "where": "description"}) from exc
         view = _tree_view(body.domain, result.tree, result.node_confidence)
         spec = store.add_spec(body.domain, body.description, view["tree"], result.confidence, list(result.warnings),
                               view["node_confidence"])
@@ -158,28 +191,39 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
         if body.domain != spec["domain"]:
             raise HTTPException(422, {"message": f"specification {spec_id} is for {spec['domain']}", "where": "domain"})
         tree = _parse(body.domain, body.tree, body.grid)
-        store.update_spec_tree(spec_id, tree_to_json(tree))
+        old_grid, new_grid = to_grid(parse_tree(spec["tree"], get_domain(spec["domain"]).vocab)), to_grid(tree)
+        kept = {k: v for k, v in spec["node_confidence"].items() if old_grid[int(k)] == new_grid[int(k)]}
+        store.update_spec_tree(spec_id, tree_to_json(tree), kept)
         return get_spec(spec_id)
 
     # --- optimize ---------------------------------------------------------------------------
+    def run_or_404(run_id: str) -> dict:
+        run = store.get_run(run_id)
+        if not run:
+            raise HTTPException(404, f"no run {run_id!r}")
+        return run
+
     @app.post("/api/runs", status_code=201)
     def start_run(body: RunIn) -> dict:
         tree = _parse(body.domain, body.tree)
+        problem = steps_problem(body.domain, body.steps)
+        if problem:
+            raise HTTPException(422, {"message": problem, "where": "steps"})
+        if store.count_runs(("queued",)) >= max_waiting_runs:
+            raise HTTPException(429, f"{max_waiting_runs} runs are already waiting; wait for them or cancel some")
         run = store.add_run(body.domain, tree_to_json(tree), body.steps, body.seed, runs_dir, body.spec_id)
         runs.submit(run["id"])
         return run_view(run["id"])
 
     @app.get("/api/runs")
     def list_runs() -> list[dict]:
-        return store.list_runs()
+        return [{**run, "progress": outcome.progress(run)} for run in store.list_runs()]
 
     @app.get("/api/runs/{run_id}")
     def run_view(run_id: str) -> dict:
-        run = store.get_run(run_id)
-        if not run:
-            raise HTTPException(404, f"no run {run_id!r}")
+        run = run_or_404(run_id)
         out = Path(run["out_dir"])
-        view: dict[str, Any] = {**run, "curve": read_curve(out, run["domain"])}
+        view: dict[str, Any] = {**run, "curve": read_curve(out, run["domain"]), "progress": outcome.progress(run)}
         vocab = get_domain(run["domain"]).vocab
         initial = parse_tree(run["tree"], vocab)
         view["initial"] = _tree_view(run["domain"], initial)
@@ -193,17 +237,44 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
                                  "svg": to_svg(final, vocab, highlight={s: "#fff59d" for s in slots})}
             except TreeError:  # a raw threshold test the domain has no question for
                 view["final"] = {"tree": final_json, "changed": [], "svg": None, "text": json.dumps(final_json, indent=1)}
+            view["result"] = outcome.result(run["summary"], view["final"]["changed"])
         return view
 
     @app.post("/api/runs/{run_id}/resume")
     def resume_run(run_id: str) -> dict:
-        run = store.get_run(run_id)
-        if not run:
-            raise HTTPException(404, f"no run {run_id!r}")
-        if run["status"] not in ("interrupted", "failed"):
-            raise HTTPException(409, f"run {run_id} is {run['status']}; only interrupted or failed runs resume")
+        run = run_or_404(run_id)
+        if run["status"] == "failed":
+            raise HTTPException(409, f"run {run_id} failed ({run['error']}); resuming would fail the same way: "
+                                     "start a new run")
+        if run["status"] not in ("interrupted", "cancelled"):
+            raise HTTPException(409, f"run {run_id} is {run['status']}; only interrupted or cancelled runs resume")
+        pid = holder(Path(run["out_dir"]))
+        if pid is not None:
+            raise HTTPException(409, f"process {pid} is still writing run {run_id}; wait for it to end")
         runs.submit(run_id)
         return run_view(run_id)
+
+    @app.post("/api/runs/{run_id}/cancel")
+    def cancel_run(run_id: str) -> dict:
+        """Stop a queued or running run; it keeps its last checkpoint and can be resumed."""
+        run = run_or_404(run_id)
+        if not runs.cancel(run_id):
+            raise HTTPException(409, f"run {run_id} is {run['status']}; only queued or running runs can be cancelled")
+        return run_view(run_id)
+
+    @app.delete("/api/runs/{run_id}")
+    def delete_run(run_id: str) -> dict:
+        """Forget a run that is not going, and delete its folder."""
+        run = run_or_404(run_id)
+        if run["status"] in WAITING:
+            raise HTTPException(409, f"run {run_id} is {run['status']}; cancel it first")
+        out = Path(run["out_dir"])
+        if holder(out) is not None:
+            raise HTTPException(409, f"a process is still writing run {run_id}; wait for it to end")
+        store.delete_run(run_id)
+        if out.resolve().parent == runs_dir.resolve() and out.is_dir():
+            shutil.rmtree(out, ignore_errors=True)
+        return {"deleted": run_id}
 
     @app.get("/api/runs/{run_id}/policy")
     def download_policy(run_id: str) -> Response:
@@ -235,6 +306,20 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
 
     # --- pages ------------------------------------------------------------------------------
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
+
+    @app.get("/docs", include_in_schema=False)
+    def api_reference() -> FileResponse:
+        """The API reference, drawn from /openapi.json by a page served here: it works offline
+        (FastAPI's Swagger UI loads its scripts from a CDN; it stays at /docs/swagger)."""
+        return FileResponse(STATIC / "docs.html")
+
+    @app.get("/docs/swagger", include_in_schema=False)
+    def swagger() -> HTMLResponse:
+        return get_swagger_ui_html(openapi_url="/openapi.json", title="nl2policy API (Swagger UI, needs internet)")
+
+    @app.get("/favicon.ico", include_in_schema=False)
+    def favicon() -> FileResponse:
+        return FileResponse(STATIC / "favicon.svg", media_type="image/svg+xml")
 
     @app.get("/", include_in_schema=False)
     def specify_page() -> FileResponse:

@@ -3,6 +3,10 @@ collected corpus submissions.
 
 Every write is one transaction; the database runs in WAL mode so pages can read while a run
 writes, and each call opens its own connection, so concurrent requests never share one.
+
+Opening checks the file first (`StoreError` names it and says what to do): an empty, garbage,
+truncated or damaged file is refused, never replaced by a fresh empty database, since the user's
+specifications and runs may be recoverable from it.
 """
 
 from __future__ import annotations
@@ -33,18 +37,52 @@ CREATE TABLE IF NOT EXISTS submissions (
 );
 """
 
-RUN_STATES = ("queued", "running", "finished", "failed", "interrupted")
+RUN_STATES = ("queued", "running", "finished", "failed", "interrupted", "cancelled")
+WAITING = ("queued", "running")
+
+
+class StoreError(Exception):
+    """The database file cannot be used; the message names it and says what to do."""
+
+
+def _damaged(path: Path, what: str) -> StoreError:
+    return StoreError(f"the database {path} {what}; nothing was changed. Move it aside (e.g. to {path.name}.damaged) "
+                      "to start a new, empty database, or restore it from a backup")
+
+
+def _unwritable(path: Path, reason: str) -> StoreError:
+    return StoreError(f"cannot write the database {path}: {reason}; make its folder writable, or set NL2POLICY_HOME "
+                      "(or --db) to a writable place")
 
 
 class Store:
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        db = sqlite3.connect(self.path, timeout=30)
+        if self.path.is_dir():
+            raise StoreError(f"the database path {self.path} is a folder; give a file (e.g. {self.path / 'nl2policy.sqlite'})")
+        if self.path.is_file() and self.path.stat().st_size == 0:
+            raise _damaged(self.path, "is an empty file (0 bytes), not an nl2policy database")
         try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise _unwritable(self.path, exc.strerror or str(exc)) from exc
+        try:
+            db = sqlite3.connect(self.path, timeout=30)
+        except sqlite3.Error as exc:
+            raise _unwritable(self.path, str(exc)) from exc
+        try:
+            check = db.execute("PRAGMA quick_check").fetchone()[0]
+            if check != "ok":
+                raise _damaged(self.path, f"is damaged (SQLite's check says: {check[:200]})")
             db.execute("PRAGMA journal_mode=WAL")
             db.executescript(SCHEMA)
             db.commit()
+        except sqlite3.OperationalError as exc:
+            if "readonly" in str(exc) or "unable to open" in str(exc) or "disk I/O" in str(exc):
+                raise _unwritable(self.path, str(exc)) from exc
+            raise _damaged(self.path, f"cannot be read ({exc})") from exc
+        except sqlite3.DatabaseError as exc:  # "file is not a database", "disk image is malformed"
+            raise _damaged(self.path, f"is not a readable SQLite database ({exc})") from exc
         finally:
             db.close()
 
@@ -75,9 +113,13 @@ class Store:
                  json.dumps(warnings), json.dumps(node_confidence), now, now))
         return self.get_spec(spec_id)
 
-    def update_spec_tree(self, spec_id: str, tree: dict) -> Optional[dict]:
+    def update_spec_tree(self, spec_id: str, tree: dict, node_confidence: Optional[dict] = None) -> Optional[dict]:
+        """A new tree for a spec; `node_confidence` replaces the translator's per-node confidences
+        (an edited node has none: the translator never proposed it)."""
         with self._connect() as db:
-            cur = db.execute("UPDATE specs SET tree=?, updated=? WHERE id=?", (json.dumps(tree), time.time(), spec_id))
+            cur = db.execute("UPDATE specs SET tree=?, node_confidence=COALESCE(?, node_confidence), updated=? WHERE id=?",
+                             (json.dumps(tree), None if node_confidence is None else json.dumps(node_confidence),
+                              time.time(), spec_id))
             if cur.rowcount == 0:
                 return None
         return self.get_spec(spec_id)
@@ -122,12 +164,14 @@ class Store:
                 rows = db.execute("SELECT * FROM runs ORDER BY created DESC LIMIT ?", (limit,)).fetchall()
         return [_run(r) for r in rows]
 
-    def mark_unfinished_interrupted(self) -> int:
-        """After a restart no run can still be going: say so, so the user can resume them."""
+    def count_runs(self, statuses: tuple[str, ...]) -> int:
         with self._connect() as db:
-            cur = db.execute("UPDATE runs SET status='interrupted', updated=? WHERE status IN ('running','queued')",
-                             (time.time(),))
-            return cur.rowcount
+            marks = ",".join("?" * len(statuses))
+            return db.execute(f"SELECT COUNT(*) FROM runs WHERE status IN ({marks})", statuses).fetchone()[0]
+
+    def delete_run(self, run_id: str) -> bool:
+        with self._connect() as db:
+            return db.execute("DELETE FROM runs WHERE id=?", (run_id,)).rowcount > 0
 
     # collected submissions ----------------------------------------------------------------
     def add_submission(self, domain: str, writer: str, tree: dict, description: str) -> dict:

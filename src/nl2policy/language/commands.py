@@ -25,7 +25,7 @@ def train_translator(
 ) -> None:
     """Train a translator on the whole shared corpus and save it as the domain's model (resumes
     from its checkpoint if a run was interrupted)."""
-    from nl2policy.cli import domain_or_fail, err, fail, progress_bar
+    from nl2policy.console import domain_or_fail, err, fail, progress_bar
     from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
     from nl2policy.language.translate import train_default
 
@@ -48,10 +48,8 @@ def translate_cmd(
     model: Optional[str] = typer.Option(None, help="Model name (default: the best model)"),
 ) -> None:
     """Translate a description into a policy tree with its confidence."""
-    from nl2policy.cli import console, domain_or_fail, err, fail
+    from nl2policy.console import console, description_or_fail, domain_or_fail, err, exit_without_teardown, fail
     from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
-    from nl2policy.language.translate import EmptyDescription, get_model, translate
-    from nl2policy.trees import to_text
 
     d = domain_or_fail(domain)
     name = model or DEFAULT_MODEL
@@ -62,28 +60,52 @@ def translate_cmd(
             fail("give either a TEXT argument or --jsonl FILE, not both")
         if not jsonl.is_file():
             fail(f"no such file: {jsonl}")
+        try:
+            lines = jsonl.read_text(encoding="utf-8").splitlines()
+        except UnicodeDecodeError:
+            fail(f"--jsonl {jsonl} is not a UTF-8 text file (one JSON object per line)")
+        except OSError as exc:
+            fail(f"cannot read --jsonl {jsonl}: {exc.strerror or exc}")
+        from nl2policy.language.translate import get_model
+
         get_model(domain, name)
-        for lineno, line in enumerate(jsonl.read_text().splitlines(), 1):
+        for lineno, line in enumerate(lines, 1):
             print(json.dumps(_jsonl_line(domain, name, line, lineno)), flush=True)
         return
     if text is None:
         fail("give a description to translate (or --jsonl FILE)")
+    if text.strip():  # an empty one gets the translator's own message below
+        description_or_fail(text)
+    import torch
+
+    from nl2policy.language.translate import EmptyDescription, translate
+    from nl2policy.trees import to_text
+
+    # One torch thread, as the server and the experiments translate: a single short text gains
+    # nothing from more, and starting torch's thread pool for it made the first pass of a cold
+    # translation many times slower on a busy 2-core machine (the last phase that
+    # benchmarks/cold_translate.py prints).
+    torch.set_num_threads(1)
+    from nl2policy.paths import HomeError
+
     try:
         result = translate(domain, text, name)
-    except EmptyDescription as exc:
+    except (EmptyDescription, HomeError) as exc:  # HomeError: no model, and nowhere to train one
         fail(str(exc))
     if json_out:
         print(json.dumps(result.to_json()))
-        return
-    console.print(to_text(result.tree, d.vocab), highlight=False)
-    console.print(f"confidence: {result.confidence:.2f}", highlight=False)
-    for w in result.warnings:
-        err.print(f"[yellow]warning:[/] {w}", highlight=False)
+    else:
+        console.print(to_text(result.tree, d.vocab), highlight=False)
+        console.print(f"confidence: {result.confidence:.2f}", highlight=False)
+        for w in result.warnings:
+            err.print(f"[yellow]warning:[/] {w}", highlight=False)
+    exit_without_teardown()
 
 
 def _jsonl_line(domain: str, name: str, line: str, lineno: int) -> dict:
     """One output object per input line: the translation, or {"error": why}."""
     from nl2policy.language.translate import EmptyDescription, translate
+    from nl2policy.limits import MAX_DESCRIPTION
 
     try:
         row = json.loads(line)
@@ -93,6 +115,9 @@ def _jsonl_line(domain: str, name: str, line: str, lineno: int) -> dict:
         return {"error": f"line {lineno}: no 'description' field"}
     if not isinstance(row["description"], str):
         return {"error": f"line {lineno}: 'description' must be a string"}
+    if len(row["description"]) > MAX_DESCRIPTION:
+        return {"error": f"line {lineno}: the description is {len(row['description']):,} characters long; "
+                         f"the limit is {MAX_DESCRIPTION:,}"}
     try:
         return translate(domain, row["description"], name).to_json()
     except EmptyDescription as exc:
@@ -151,7 +176,7 @@ def translation_experiment(
     """Cross-validation and leave-writers-out accuracy of every translator (resumable)."""
     import torch
 
-    from nl2policy.cli import console, domain_or_fail, err
+    from nl2policy.console import console, domain_or_fail, err
     from nl2policy.language.evaluate import run_experiment
     from nl2policy.language.summary import summarize
     from nl2policy.language.models.config import DEFAULT_MODEL

@@ -69,8 +69,13 @@ def model_path(domain: str, name: str = DEFAULT_MODEL, folder: Optional[Path] = 
 
 
 def find_model(domain: str, name: str = DEFAULT_MODEL) -> Optional[Path]:
-    """The user's trained model if there is one, else the shipped one, else None."""
-    for folder in (model_dir(), SHIPPED_DIR):
+    """The user's trained model if there is one, else the shipped one, else None. A data folder
+    that cannot be made has no user models: the shipped one still translates."""
+    try:
+        folders = [model_dir(), SHIPPED_DIR]
+    except OSError:
+        folders = [SHIPPED_DIR]
+    for folder in folders:
         path = model_path(domain, name, folder)
         if path.is_file():
             return path

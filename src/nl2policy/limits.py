@@ -1,0 +1,63 @@
+"""Limits on what a user may ask for, shared by the CLI and the web API so both refuse the same
+input with the same words (a description the API refuses is refused by the CLI too).
+
+Nothing here imports anything heavy: the CLI reads these before it loads a model.
+"""
+
+from __future__ import annotations
+
+MAX_DESCRIPTION = 5000
+"""Characters in a description; the corpus's longest is about 1,500."""
+
+MAX_SEED = 2**32 - 1
+"""numpy and gymnasium take seeds in [0, 2^32 - 1]; a larger one makes a run fail later."""
+
+MAX_STEPS = 200_000
+"""PPO steps one web run may ask for: the server trains one run at a time on a shared machine."""
+
+MAX_BODY_BYTES = 1_000_000
+"""Largest request body the web API reads (a tree or a description is a few KB)."""
+
+MAX_WAITING_RUNS = 20
+"""Queued runs the server keeps: more would only hold the machine for hours."""
+
+
+MAX_MESSAGE = 400
+"""Characters of any one error message: messages quote what was given, which may be huge."""
+
+
+def clipped(text: str, limit: int = MAX_MESSAGE) -> str:
+    """`text`, or its first `limit` characters and how long it was."""
+    return text if len(text) <= limit else f"{text[:limit]}… ({len(text):,} characters)"
+
+
+def description_problem(text: str) -> str | None:
+    """Why a description cannot be translated, or None when it can be."""
+    if not text.strip():
+        return "the description is empty: say what the robot should do"
+    if len(text) > MAX_DESCRIPTION:
+        return f"the description is {len(text):,} characters long; the limit is {MAX_DESCRIPTION:,}"
+    return None
+
+
+def rollout_steps(domain: str) -> int:
+    """PPO's rollout length for `domain`: training runs in whole rollouts, so a run of N steps
+    trains N rounded up to a multiple of it (``optimize --steps 1`` trains one rollout)."""
+    from nl2policy.policy.sb3_policy import PPO_SETTINGS
+
+    return int(PPO_SETTINGS[domain]["n_steps"])
+
+
+def steps_problem(domain: str, steps: int, option: str = "steps") -> str | None:
+    """Why `steps` cannot be trained as asked, or None."""
+    rollout = rollout_steps(domain)
+    if steps < rollout:
+        return (f"{option} {steps} is less than one PPO rollout: {domain} trains in rollouts of {rollout} steps, "
+                f"so ask for at least {rollout}")
+    return None
+
+
+def trained_steps(domain: str, steps: int) -> int:
+    """The steps a run asked for `steps` really trains: rounded up to whole rollouts."""
+    rollout = rollout_steps(domain)
+    return -(-steps // rollout) * rollout
