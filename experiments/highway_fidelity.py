@@ -5,9 +5,11 @@ Two measurements, both on the random policy and on corpus trees spread over the 
 1. **Same distribution** (unpaired): each simulator draws its own scenes; mean return, crash
    rate, mean forward speed and the share of decisions in the right lane over `--episodes`
    episodes each, with standard errors, and the rank correlation of the policies' returns.
-2. **Same scene** (paired): `--paired-episodes` twin scenes are copied into highway-env
-   (``highway_twin.copy_scene_to``) and both run the policy from there; the share of
-   episodes whose return agrees to 1e-6, and the largest return difference.
+2. **Same scene** (paired), both ways: `--paired-episodes` twin scenes are copied into
+   highway-env (``highway_twin.copy_scene_to``) and both run the policy from there; and every
+   one of highway-env's own `--episodes` episodes is replayed in the twin from highway-env's
+   scene (``copy_scene_from``). The share of episodes whose return agrees to 1e-6, and the
+   crash rate of the replays against highway-env's on the very same episodes.
 
 The trees are chosen by the twin alone, on screening episodes whose seeds the evaluation
 never uses: every distinct corpus tree is run for `--screen-episodes` episodes and the trees
@@ -40,7 +42,7 @@ from scipy.stats import spearmanr
 from nl2policy.data import corpus_dir
 from nl2policy.domains import get_domain
 from nl2policy.domains.highway import META_ACTION, HighwayFeatures
-from nl2policy.domains.highway_twin import HighwayTwin, copy_scene_to
+from nl2policy.domains.highway_twin import HighwayTwin, copy_scene_from, copy_scene_to
 from nl2policy.domains.highway_vec import twin_episodes
 from nl2policy.trees import parse_tree, tree_to_json
 
@@ -95,6 +97,12 @@ def highway_env_chunk(policy: int, tree: Optional[dict], first: int, count: int,
     return {"kind": "unpaired", "policy": policy, "first": first, "count": count, "episodes": rows}
 
 
+def replay_chunk(policy: int, tree: Optional[dict], first: int, count: int, seed: int) -> dict:
+    """One highway_env_chunk's episodes replayed in the twin from highway-env's scenes."""
+    return {"kind": "replay", "policy": policy, "first": first, "count": count,
+            "episodes": replay_in_twin(tree, first, count, seed)}
+
+
 def paired_chunk(policy: int, tree: Optional[dict], first: int, count: int, seed: int) -> dict:
     """Twin scenes first .. first+count-1 of PAIRED_SEED, each run in the twin and in highway-env."""
     env = HighwayFeatures()
@@ -119,6 +127,28 @@ def paired_chunk(policy: int, tree: Optional[dict], first: int, count: int, seed
         rows.append({"highway_env": highway["return"], "twin": total})
     env.close()
     return {"kind": "paired", "policy": policy, "first": first, "count": count, "episodes": rows}
+
+
+def replay_in_twin(tree: Optional[dict], first: int, count: int, seed: int) -> list[dict]:
+    """highway-env's episodes seed+first .. seed+first+count-1, replayed in the twin from
+    highway-env's own scenes (``copy_scene_from``) with the policy as highway_env_chunk ran it
+    (a random policy draws from the same generator, episode after episode)."""
+    env = HighwayFeatures()
+    act = batch_policy(tree, seed + first)
+    rows = []
+    for episode in range(first, first + count):
+        env.reset(seed=seed + episode)
+        twin = HighwayTwin(1)
+        copy_scene_from(env, twin, 0)
+        obs, total, steps, done = twin.features(), 0.0, 0, False
+        while not done:
+            reward, terminated, truncated = twin.step(np.asarray([META_ACTION[int(act(obs)[0])]]))
+            obs = twin.features()
+            total, steps = total + float(reward[0]), steps + 1
+            done = bool(terminated[0] or truncated[0])
+        rows.append({"return": total, "crashed": bool(twin.crashed[0, 0]), "steps": steps})
+    env.close()
+    return rows
 
 
 def _run_highway_env(env: HighwayFeatures, obs: np.ndarray, act: Callable) -> dict:
@@ -160,6 +190,16 @@ def summarize(policies: list[Optional[dict]], runs: list[dict], twin: list[dict]
         crash_diff = row["twin_crashed"] - row["highway_env_crashed"]
         row["crash_diff_points"] = 100 * crash_diff
         row["crash_diff_se_points"] = 100 * math.hypot(row["twin_crashed_se"], row["highway_env_crashed_se"])
+        replay = [e for r in runs if r["kind"] == "replay" and r["policy"] == p for e in r["episodes"]]
+        if replay:  # matched to highway-env's episodes by seed
+            hw_by_first = {r["first"]: r["episodes"] for r in runs if r["kind"] == "unpaired" and r["policy"] == p}
+            rp_by_first = {r["first"]: r["episodes"] for r in runs if r["kind"] == "replay" and r["policy"] == p}
+            pairs = [(h, t) for first in sorted(rp_by_first) for h, t in zip(hw_by_first[first], rp_by_first[first])]
+            row["replay_episodes"] = len(pairs)
+            row["replay_identical"] = float(np.mean([abs(h["return"] - t["return"]) <= 1e-6 for h, t in pairs]))
+            row["replay_crashed"] = float(np.mean([t["crashed"] for _, t in pairs]))
+            row["replay_crash_diff_points"] = 100 * (row["replay_crashed"] - float(np.mean([h["crashed"] for h, _ in pairs])))
+            row["replay_return"] = float(np.mean([t["return"] for _, t in pairs]))
         if paired:
             gaps = np.array([abs(e["twin"] - e["highway_env"]) for e in paired])
             row["paired_episodes"] = len(paired)
@@ -187,10 +227,13 @@ def write_tables(rows: list[dict], meta: dict, out: Path) -> None:
         "Return: mean episode return (standard error). Within: |twin - highway-env| at most 5% of "
         "highway-env's mean or 2 standard errors of the difference, whichever is wider. Crash, "
         "speed (mean forward m/s over decisions) and right lane (share of decisions) as means. "
-        "Same scene: share of paired episodes whose returns agree to 1e-6.",
+        f"Same scene: share of episodes whose returns agree to 1e-6, from the twin's scenes "
+        f"({meta['paired_episodes']} a policy) and from highway-env's own scenes (its {meta['highway_env_episodes']} "
+        "episodes replayed in the twin), with the replays' crash rate minus highway-env's on those same episodes "
+        "(points).",
         "",
         "| policy | highway-env return | twin return | within | crash % hw / twin (diff ± se) | speed hw / twin "
-        "| right lane hw / twin | same scene |",
+        "| right lane hw / twin | same scene: twin's / highway-env's scenes (crash diff) |",
         "|---|---:|---:|:-:|---:|---:|---:|---:|",
     ]
     for r in rows:
@@ -201,15 +244,18 @@ def write_tables(rows: list[dict], meta: dict, out: Path) -> None:
             f"({r['crash_diff_points']:+.1f} ± {r['crash_diff_se_points']:.1f}) "
             f"| {r['highway_env_mean_speed']:.2f} / {r['twin_mean_speed']:.2f} "
             f"| {r['highway_env_right_lane']:.3f} / {r['twin_right_lane']:.3f} "
-            f"| {100 * r.get('paired_identical', float('nan')):.0f}% |")
+            f"| {100 * r.get('paired_identical', float('nan')):.0f}% / {100 * r.get('replay_identical', float('nan')):.1f}% "
+            f"({r.get('replay_crash_diff_points', float('nan')):+.1f}) |")
     within = sum(r["return_within"] for r in rows)
+    replay2 = sum(abs(r.get("replay_crash_diff_points", float("inf"))) <= 2 for r in rows)
     crash2 = sum(abs(r["crash_diff_points"]) <= 2 for r in rows)
     crash_se = sum(abs(r["crash_diff_points"]) <= 2 * r["crash_diff_se_points"] for r in rows)
     lines += [
         "",
         f"Returns within tolerance: {within} of {len(rows)}. Crash rates within 2 points: {crash2} of "
         f"{len(rows)}; within 2 standard errors of the difference: {crash_se} of {len(rows)}. "
-        f"Spearman rank correlation of the policies' returns: {rho:.3f}.",
+        f"Spearman rank correlation of the policies' returns: {rho:.3f}. On the same episodes (highway-env's "
+        f"scenes replayed in the twin) crash rates agree within 2 points for {replay2} of {len(rows)}.",
         "",
         "Trees, in table order:",
         "",
@@ -248,6 +294,8 @@ def main(
             for p in range(len(policies)) for first in range(0, episodes, chunk)]
     jobs += [("paired", p, first, min(chunk, paired_episodes - first))
              for p in range(len(policies)) for first in range(0, paired_episodes, chunk)]
+    jobs += [("replay", p, first, min(chunk, episodes - first))
+             for p in range(len(policies)) for first in range(0, episodes, chunk)]
     todo = [j for j in jobs if (j[0], j[1], j[2]) not in done]
     console.print(f"{len(policies)} policies; {len(jobs) - len(todo)} of {len(jobs)} highway-env jobs done before")
     started = time.perf_counter()
@@ -256,8 +304,8 @@ def main(
         task = bar.add_task("highway-env episodes", total=sum(j[3] for j in todo))
         futures = {}
         for kind, p, first, count in todo:
-            fn = highway_env_chunk if kind == "unpaired" else paired_chunk
-            run_seed = seed if kind == "unpaired" else PAIRED_SEED + seed
+            fn = {"unpaired": highway_env_chunk, "paired": paired_chunk, "replay": replay_chunk}[kind]
+            run_seed = PAIRED_SEED + seed if kind == "paired" else seed
             futures[pool.submit(fn, p, policies[p], first, count, run_seed)] = count
         for future in as_completed(futures):
             result = {**future.result(), "command": command}

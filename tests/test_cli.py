@@ -53,7 +53,7 @@ def test_unknown_domain_exits_nonzero():
 
 def test_translation_experiment_rejects_a_bad_plan_or_nothing_to_summarise(tmp_path):
     out = runner.invoke(app, ["translation-experiment", "--domain", "taxi", "--plan", "seq2seq:cv2x", "--out", str(tmp_path)])
-    assert out.exit_code == 2 and "protocol 'cv2x' is not cvR or writers" in out.output
+    assert out.exit_code == 2 and "protocol 'cv2x' is not cvR, treesR or writers" in out.output
     out = runner.invoke(app, ["translation-experiment", "--domain", "taxi", "--plan", "seq2seq:cv1", "--out",
                               str(tmp_path / "empty"), "--summarize-only"])
     assert out.exit_code == 2 and "no folds to summarise" in out.output

@@ -3,6 +3,8 @@ the same distribution, and behaves as a Gymnasium env, a Gymnasium vector env an
 
 from __future__ import annotations
 
+import json
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -181,3 +183,17 @@ def test_optimize_highway_on_the_twin_reports_highway_env_returns(tmp_path):
     assert summary["steps"] == 16 * 256  # one rollout of 16 twin episodes
     assert "HighwayTwin" in summary["keep_best"]["scored_by"]
     assert summary["keep_best"]["kept_score"] >= summary["keep_best"]["initial_score"]
+
+
+def test_optimize_cli_refuses_an_unknown_simulator_and_counts_twin_rollouts(tmp_path):
+    from typer.testing import CliRunner
+
+    from nl2policy.cli import app
+    from nl2policy.limits import rollout_steps
+
+    assert rollout_steps("highway") == 16 * 256 and rollout_steps("highway", "reference") == 256
+    tree = json.dumps({"do": "idle"})
+    result = CliRunner().invoke(app, ["optimize", "--domain", "highway", "--tree", tree, "--simulator", "warp",
+                                      "--out", str(tmp_path)])
+    assert result.exit_code == 2
+    assert result.output.strip().splitlines()[-1] == "error: --simulator must be one of fast, reference, not 'warp'"

@@ -175,7 +175,7 @@ def test_polish_climbs_to_a_local_optimum_and_never_descends():
 
 def test_polish_refuses_a_domain_without_an_exact_model(tmp_path):
     tree = json.dumps({"do": "idle"})
-    result = runner.invoke(app, ["optimize", "--domain", "highway", "--tree", tree, "--steps", "64", "--polish",
+    result = runner.invoke(app, ["optimize", "--domain", "highway", "--tree", tree, "--steps", "4096", "--polish",
                                  "--out", str(tmp_path)])
     assert result.exit_code == 2
     assert result.output.strip().splitlines()[-1] == "error: --polish needs an exact model; highway has none"

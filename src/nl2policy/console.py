@@ -84,13 +84,13 @@ def seed_or_fail(seed: int, option: str = "--seed") -> int:
     return seed
 
 
-def steps_or_fail(domain: str, steps: int, option: str = "--steps") -> int:
+def steps_or_fail(domain: str, steps: int, option: str = "--steps", simulator: str = "fast") -> int:
     """The steps that will really be trained: refuse fewer than one PPO rollout (it would train
     a whole one anyway), and say so when the number is rounded up to whole rollouts."""
-    problem = steps_problem(domain, steps, option)
+    problem = steps_problem(domain, steps, option, simulator)
     if problem:
         fail(problem)
-    trained = trained_steps(domain, steps)
+    trained = trained_steps(domain, steps, simulator)
     if trained != steps:
         err.print(f"note: {domain} trains in whole PPO rollouts: {option} {steps} trains {trained} steps", highlight=False)
     return trained

@@ -40,24 +40,27 @@ def description_problem(text: str) -> str | None:
     return None
 
 
-def rollout_steps(domain: str) -> int:
+def rollout_steps(domain: str, simulator: str = "fast") -> int:
     """PPO's rollout length for `domain`: training runs in whole rollouts, so a run of N steps
-    trains N rounded up to a multiple of it (``optimize --steps 1`` trains one rollout)."""
-    from nl2policy.policy.sb3_policy import PPO_SETTINGS
+    trains N rounded up to a multiple of it (``optimize --steps 1`` trains one rollout). On a
+    fast vector env (highway's twin) a rollout is n_steps from each of its episodes."""
+    from nl2policy.domains import get_domain
 
-    return int(PPO_SETTINGS[domain]["n_steps"])
+    d = get_domain(domain)
+    envs = d.knobs.train_envs if simulator == "fast" and d.train_env_id is not None else 1
+    return d.knobs.ppo.n_steps * envs
 
 
-def steps_problem(domain: str, steps: int, option: str = "steps") -> str | None:
+def steps_problem(domain: str, steps: int, option: str = "steps", simulator: str = "fast") -> str | None:
     """Why `steps` cannot be trained as asked, or None."""
-    rollout = rollout_steps(domain)
+    rollout = rollout_steps(domain, simulator)
     if steps < rollout:
         return (f"{option} {steps} is less than one PPO rollout: {domain} trains in rollouts of {rollout} steps, "
                 f"so ask for at least {rollout}")
     return None
 
 
-def trained_steps(domain: str, steps: int) -> int:
+def trained_steps(domain: str, steps: int, simulator: str = "fast") -> int:
     """The steps a run asked for `steps` really trains: rounded up to whole rollouts."""
-    rollout = rollout_steps(domain)
+    rollout = rollout_steps(domain, simulator)
     return -(-steps // rollout) * rollout

@@ -568,3 +568,24 @@ def copy_scene_to(env: Any, twin: HighwayTwin, episode: int) -> None:
             car.speed_index = car.speed_to_index(car.target_speed)
         else:
             car.DELTA, car.timer = float(twin.delta[episode, i]), float(twin.timer[episode, i])
+
+
+def copy_scene_from(env: Any, twin: HighwayTwin, episode: int) -> None:
+    """Put a freshly reset highway-env scene into twin episode `episode`, car by car (the
+    reverse of ``copy_scene_to``): to replay highway-env's own episodes in the twin."""
+    highway = getattr(env, "highway", env)
+    cars = highway.road.vehicles
+    if len(cars) != twin.v:
+        raise ValueError(f"highway-env has {len(cars)} cars, the twin {twin.v}")
+    twin.x[episode] = [car.position[0] for car in cars]
+    twin.y[episode] = [car.position[1] for car in cars]
+    twin.heading[episode] = [car.heading for car in cars]
+    twin.speed[episode] = [car.speed for car in cars]
+    twin.lane[episode] = [car.lane_index[2] for car in cars]
+    twin.target_lane[episode] = [car.target_lane_index[2] for car in cars]
+    twin.target_speed[episode] = [car.target_speed for car in cars]
+    twin.delta[episode] = [IDM.DELTA] + [car.DELTA for car in cars[1:]]
+    twin.timer[episode] = [0.0] + [car.timer for car in cars[1:]]
+    twin.crashed[episode] = [car.crashed for car in cars]
+    twin.impact_pending[episode] = False
+    twin.time[episode] = 0

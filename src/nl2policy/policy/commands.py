@@ -20,7 +20,7 @@ def optimize(
     domain: str = typer.Option(..., help="taxi or highway"),
     tree: str = typer.Option(..., help="A tree as inline JSON or a path to a JSON file"),
     steps: int = typer.Option(20_000, help="PPO env steps (whole rollouts: rounded up to a multiple of 512 for taxi, "
-                                           "256 for highway)"),
+                                           "4,096 for highway on its twin, 256 on highway-env)"),
     seed: int = typer.Option(0),
     out: Path = typer.Option(Path("runs/optimize"), help="Output folder; holding a checkpoint, the run resumes"),
     eval_episodes: Optional[int] = typer.Option(None, min=1, help="Episodes for the before/after returns (default: the domain's eval_episodes, domains/<name>.toml)"),
@@ -33,13 +33,16 @@ def optimize(
     from nl2policy.console import (console, domain_or_fail, fail, out_dir_or_fail, progress_bar, seed_or_fail,
                                    steps_or_fail, tree_or_fail)
     from nl2policy.policy.optimize import optimize_tree
+    from nl2policy.policy.sb3_policy import SIMULATORS
     from nl2policy.trees import parse_tree, to_text
 
     torch.set_num_threads(1)
     d = domain_or_fail(domain)
     parsed = tree_or_fail(domain, tree)
     seed_or_fail(seed)
-    total = steps_or_fail(domain, steps)
+    if simulator not in SIMULATORS:
+        fail(f"--simulator must be one of {', '.join(SIMULATORS)}, not {simulator!r}")
+    total = steps_or_fail(domain, steps, simulator=simulator)
     out_dir_or_fail(out)
     with progress_bar() as bar:
         task = bar.add_task(f"{domain}: PPO steps", total=total)
