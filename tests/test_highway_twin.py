@@ -197,3 +197,20 @@ def test_optimize_cli_refuses_an_unknown_simulator_and_counts_twin_rollouts(tmp_
                                       "--out", str(tmp_path)])
     assert result.exit_code == 2
     assert result.output.strip().splitlines()[-1] == "error: --simulator must be one of fast, reference, not 'warp'"
+
+
+def test_with_highway_env_seeding_a_twin_episode_is_highway_envs_episode_for_that_seed():
+    """Seeded as highway-env seeds itself, twin episode i is highway-env's episode with seed
+    s + i: the same scene bit for bit, then the same rewards under the same policy."""
+    episodes, seed = 3, 70
+    ours = twin_episodes(_weaver_actions, episodes, seed, seeding="highway-env")
+    env = HighwayFeatures()
+    for i in range(episodes):
+        obs, _ = env.reset(seed=seed + i)
+        total, done = 0.0, False
+        while not done:
+            obs, reward, terminated, truncated, _ = env.step(int(_weaver_actions(obs[None, :])[0]))
+            total, done = total + reward, terminated or truncated
+        assert ours["return"][i] == pytest.approx(total, abs=1e-9)
+    single = gym.make("nl2policy/HighwayTwin-v0")
+    np.testing.assert_array_equal(single.reset(seed=seed)[0], env.reset(seed=seed)[0])

@@ -46,7 +46,8 @@ class HighwayTwinEnv(gym.Env):
     def __init__(self, render_mode: Optional[str] = None, config: Optional[dict] = None) -> None:
         if render_mode is not None:
             raise ValueError("the highway twin does not render; use nl2policy/Highway-v0 to watch a policy")
-        self.twin = HighwayTwin(1, TwinConfig.from_highway_env(config))
+        # Seeded as highway-env seeds itself: reset(seed=s) gives highway-env's scene for s.
+        self.twin = HighwayTwin(1, TwinConfig.from_highway_env(config), seeding="highway-env")
         self.observation_space = OBSERVATION_SPACE
         self.action_space = spaces.Discrete(ACTION_COUNT)
 
@@ -71,11 +72,13 @@ class HighwayTwinVectorEnv(VectorEnv):
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.SAME_STEP}
 
     def __init__(self, num_envs: int = 1, render_mode: Optional[str] = None, config: Optional[dict] = None,
-                 **_: Any) -> None:
+                 seeding: str = "batch", **_: Any) -> None:
+        """`seeding`: "batch" draws every scene from one generator in batches (training);
+        "highway-env" gives episode i highway-env's scenes for seed + i, at 0.6 ms a reset."""
         if render_mode is not None:
             raise ValueError("the highway twin does not render")
         self.num_envs = int(num_envs)
-        self.twin = HighwayTwin(self.num_envs, TwinConfig.from_highway_env(config))
+        self.twin = HighwayTwin(self.num_envs, TwinConfig.from_highway_env(config), seeding=seeding)
         self.single_observation_space = OBSERVATION_SPACE
         self.single_action_space = spaces.Discrete(ACTION_COUNT)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -105,14 +108,16 @@ class HighwayTwinVectorEnv(VectorEnv):
         return obs, reward.astype(np.float64), terminated, truncated, infos
 
 
-def twin_episodes(act: Any, episodes: int, seed: int, config: Optional[dict] = None) -> dict[str, np.ndarray]:
+def twin_episodes(act: Any, episodes: int, seed: int, config: Optional[dict] = None,
+                  seeding: str = "batch") -> dict[str, np.ndarray]:
     """Run `episodes` twin episodes side by side, each to its end, with `act` mapping a batch of
     feature rows (n, 6) to our action indices (n,). Per episode: ``return``, ``crashed``,
     ``steps``, ``mean_speed`` (forward, m/s, over decisions) and ``right_lane`` (share of
-    decisions ending in the rightmost lane)."""
+    decisions ending in the rightmost lane). With ``seeding="highway-env"`` episode i is
+    highway-env's episode with seed `seed` + i."""
     if episodes < 1:
         raise ValueError("episodes must be at least 1")
-    twin = HighwayTwin(episodes, TwinConfig.from_highway_env(config), seed=seed)
+    twin = HighwayTwin(episodes, TwinConfig.from_highway_env(config), seed=seed, seeding=seeding)
     running = np.ones(episodes, dtype=bool)
     total, steps = np.zeros(episodes), np.zeros(episodes, dtype=np.int64)
     speed_sum, right = np.zeros(episodes), np.zeros(episodes)
