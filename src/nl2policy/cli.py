@@ -55,7 +55,7 @@ def compare(episodes: int = typer.Option(10, min=1), seed: int = typer.Option(0)
 def run(
     text: Optional[str] = typer.Argument(None, help="What the robot should do, in plain English (default: an example)"),
     domain: str = typer.Option("taxi", help=f"One of: {', '.join(DOMAINS)}"),
-    steps: int = typer.Option(10_000, help="PPO env steps (whole rollouts: rounded up to a multiple of 512 for taxi, 256 for highway)"),
+    steps: int = typer.Option(10_000, help="PPO env steps (whole rollouts: rounded up to a multiple of 512 for taxi, 4,096 for highway on its twin)"),
     seed: int = typer.Option(0),
     out: Path = typer.Option(Path("runs/main"), help="Output folder for trees, curve and summary"),
 ) -> None:

@@ -38,7 +38,7 @@ def run_pipeline(console: Console, err: Console, domain: str, text: str, steps: 
     from nl2policy.console import fail, progress_bar
     from nl2policy.language.translate import EmptyDescription, translate
     from nl2policy.limits import trained_steps
-    from nl2policy.policy.optimize import optimize_tree
+    from nl2policy.policy.optimize import OptimizeRefused, optimize_tree
 
     console.print(Panel(text, title=f"description ({domain})", expand=False))
     try:
@@ -53,7 +53,7 @@ def run_pipeline(console: Console, err: Console, domain: str, text: str, steps: 
         task = bar.add_task(f"{domain}: PPO from the tree", total=trained_steps(domain, steps))
         try:
             summary = optimize_tree(domain, tree, steps, seed, out, progress=lambda n, total: bar.update(task, completed=n))
-        except ValueError as exc:  # --out holds another tree's checkpoint
+        except OptimizeRefused as exc:  # --out holds another tree's checkpoint
             fail(str(exc))
     final = json.loads((out / "final_tree.json").read_text())
     show_tree(console, f"after PPO (returned: {summary['returned']})", final, domain)

@@ -52,8 +52,14 @@ def main(argv: list[str]) -> int:
     except RunLocked as exc:
         print(f"error: {exc}", file=sys.stderr)
         return LOCKED_EXIT
-    from nl2policy.cli import app
+    import typer
 
+    from nl2policy.policy.commands import optimize
+
+    # The one command a run executes, as the CLI registers it, without importing the CLI.
+    app = typer.Typer(add_completion=False)
+    app.callback()(lambda: None)  # a group, so the command is named on the command line as in the CLI
+    app.command("optimize")(optimize)
     try:
         app(argv[3:], prog_name="nl2policy")
     except SystemExit as exc:

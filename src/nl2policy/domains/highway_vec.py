@@ -102,7 +102,7 @@ class HighwayTwinVectorEnv(VectorEnv):
             final_obs = np.empty(self.num_envs, dtype=object)
             for i in np.flatnonzero(done):
                 final_obs[i] = obs[i].copy()
-            infos = {"final_obs": final_obs, "_final_obs": done.copy()}
+            infos.update({"final_obs": final_obs, "_final_obs": done.copy()})
             self.twin.reset(done)
             obs = self.twin.features()
         return obs, reward.astype(np.float64), terminated, truncated, infos

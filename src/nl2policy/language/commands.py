@@ -67,8 +67,12 @@ def translate_cmd(
         except OSError as exc:
             fail(f"cannot read --jsonl {jsonl}: {exc.strerror or exc}")
         from nl2policy.language.translate import get_model
+        from nl2policy.paths import HomeError
 
-        get_model(domain, name)
+        try:
+            get_model(domain, name)
+        except HomeError as exc:  # no model, and nowhere to train one
+            fail(str(exc))
         for lineno, line in enumerate(lines, 1):
             print(json.dumps(_jsonl_line(domain, name, line, lineno)), flush=True)
         return

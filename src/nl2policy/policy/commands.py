@@ -32,7 +32,7 @@ def optimize(
 
     from nl2policy.console import (console, domain_or_fail, fail, out_dir_or_fail, progress_bar, seed_or_fail,
                                    steps_or_fail, tree_or_fail)
-    from nl2policy.policy.optimize import optimize_tree
+    from nl2policy.policy.optimize import OptimizeRefused, optimize_tree
     from nl2policy.policy.sb3_policy import SIMULATORS
     from nl2policy.trees import parse_tree, to_text
 
@@ -49,7 +49,7 @@ def optimize(
         try:
             summary = optimize_tree(domain, parsed, steps, seed, out, eval_episodes=eval_episodes, polish=polish,
                                     simulator=simulator, progress=lambda n, total: bar.update(task, completed=n))
-        except ValueError as exc:
+        except OptimizeRefused as exc:
             fail(str(exc))
     console.print("[bold]before[/]\n" + to_text(parsed, d.vocab))
     final = json.loads((out / "final_tree.json").read_text())
@@ -131,10 +131,11 @@ def ceilings(
     out: Path = typer.Option(Path("results/policy"), help="Folder for ceilings_<domain>.md / .json"),
 ) -> None:
     """The domain's yardsticks by exact search: optimum, best stationary feature policy, best trees."""
-    from nl2policy.cli import console, domain_or_fail, fail, progress_bar
+    from nl2policy.console import console, domain_or_fail, fail, out_dir_or_fail, progress_bar
     from nl2policy.policy.ceilings_report import compute_ceilings, write_ceilings
 
     domain_or_fail(domain)
+    out_dir_or_fail(out)
     command = f"nl2policy ceilings --domain {domain} --max-depth {max_depth} --out {out}"
     with progress_bar() as bar:
         task = bar.add_task(f"{domain}: ceilings", total=None)

@@ -42,6 +42,19 @@ STATE = "state.json"
 Progress = Optional[Callable[[int, int], None]]
 
 
+class OptimizeRefused(ValueError):
+    """A run that cannot start as asked (the user's to fix: another --out, another flag); the
+    commands catch only this, so a bug in training is never reported as bad input."""
+
+
+def _write_atomically(path: Path, write: Callable[[Path], None]) -> None:
+    """Write via a temporary file and a rename, so a run killed mid-write (a cancel, a kill)
+    leaves the previous checkpoint whole rather than half a new one."""
+    tmp = path.with_name(f"{path.stem}.tmp{path.suffix}")
+    write(tmp)
+    tmp.replace(path)
+
+
 class EpisodeLog(BaseCallback):
     """Records (step, return) of every finished episode (from SB3's Monitor) and reports progress."""
 
@@ -95,10 +108,17 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
     torch.set_num_threads(1)
     run_dir.mkdir(parents=True, exist_ok=True)
     state_path, ckpt_path = run_dir / STATE, run_dir / CHECKPOINT
+    d = get_domain(domain)
+    trained_on = "fast" if simulator == "fast" and d.train_env_id is not None else "reference"
     if state_path.is_file() and ckpt_path.is_file():
         state = json.loads(state_path.read_text())
-        env = make_vec_env(domain, seed + 1000 * (state["chunks"] + 1), simulator)
-        model = TreePPO.load(ckpt_path, env=env, device="cpu")
+        recorded = state.get("simulator", "reference")  # runs from before the twin trained on the reference env
+        if recorded != trained_on:
+            raise OptimizeRefused(f"{run_dir} holds a run trained on the {recorded} simulator; resume it with "
+                                  f"--simulator {recorded} or choose another --out")
+        resumed_seed = seed + 1000 * (state["chunks"] + 1)
+        model = TreePPO.load(ckpt_path, env=make_vec_env(domain, resumed_seed, simulator), device="cpu")
+        model.set_random_seed(resumed_seed)  # load reseeds with the run's first seed: new episodes, not a replay
         episodes, seconds, chunks = [tuple(e) for e in state["episodes"]], state["seconds"], state["chunks"]
         best = state.get("best_tree")
         if best is None and score_tree is not None:  # a checkpoint from before its run tracked trees
@@ -112,7 +132,8 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
             best = {"step": 0, "tree": tree_json, "score": score}
     rollout = model.n_steps * model.n_envs
     chunk = rollout * max(1, steps // (10 * rollout))  # about ten checkpoints per run
-    log = EpisodeLog(episodes, steps, progress)
+    total = -(-steps // rollout) * rollout  # PPO trains whole rollouts
+    log = EpisodeLog(episodes, total, progress)
     while model.num_timesteps < steps:
         start = time.perf_counter()
         model.learn(min(chunk, steps - model.num_timesteps), callback=log, reset_num_timesteps=False)
@@ -122,11 +143,12 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
             tree_json, score = score_tree(model)
             if score > best["score"]:
                 best = {"step": int(model.num_timesteps), "tree": tree_json, "score": score}
-        model.save(ckpt_path)
-        state_path.write_text(json.dumps({"steps": int(model.num_timesteps), "seconds": seconds,
-                                          "chunks": chunks, "episodes": episodes, "best_tree": best}))
+        _write_atomically(ckpt_path, model.save)
+        state = {"steps": int(model.num_timesteps), "seconds": seconds, "chunks": chunks, "episodes": episodes,
+                 "best_tree": best, "simulator": trained_on}
+        _write_atomically(state_path, lambda path: path.write_text(json.dumps(state)))
     if progress:
-        progress(steps, steps)
+        progress(total, total)
     return model, episodes, seconds, best
 
 
@@ -177,12 +199,12 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
     d = get_domain(domain)
     polish = d.exact is not None if polish is None else polish
     if polish and d.exact is None:
-        raise ValueError(f"--polish needs an exact model; {domain} has none")
+        raise OptimizeRefused(f"--polish needs an exact model; {domain} has none")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tree_path = out / "initial_tree.json"
     if (out / STATE).is_file() and tree_path.is_file() and json.loads(tree_path.read_text()) != tree_to_json(tree):
-        raise ValueError(f"{out} holds a checkpoint of a run from a different tree; choose another --out")
+        raise OptimizeRefused(f"{out} holds a checkpoint of a run from a different tree; choose another --out")
     tree_path.write_text(json.dumps(tree_to_json(tree), indent=2))
     scorer, rule = tree_scorer(domain)
     model, episodes, seconds, best = train_checkpointed(

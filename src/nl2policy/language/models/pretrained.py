@@ -137,15 +137,17 @@ def saved_forward(layers: int = LAYERS) -> torch.nn.Module:
             pass
     forward = _forward(layers)
     if isinstance(forward, torch.jit.ScriptModule):
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_suffix(f".{os.getpid()}.tmp")
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                torch.jit.save(forward, str(tmp))
+                torch.jit.save(forward, str(tmp))  # raises RuntimeError, not OSError, on a bad file
             tmp.replace(path)
-        except OSError:  # a read-only cache: translate anyway, just without saving
+        except (OSError, RuntimeError):  # a read-only or full cache: translate anyway, without saving
             pass
+        finally:
+            tmp.unlink(missing_ok=True) if tmp.exists() else None
     return forward
 
 
