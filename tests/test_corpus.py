@@ -108,3 +108,18 @@ def test_leave_trees_out_protocol_plans_five_folds_a_repeat_on_both_rounds():
     assert [key for key, _, _ in folds][:6] == [f"trees-r0-f{f}" for f in range(5)] + ["trees-r1-f0"]
     assert len(folds) == 10 and len(specs) == 320
     assert parse_plan("single:trees3", ["taxi"], "single") == [("taxi", "seq2tree-minilm-synth", "trees", 3)]
+
+
+def test_new_writer_folds_hold_out_each_round_two_writer_and_every_policy_they_describe():
+    from nl2policy.language.corpus import new_writer_folds, policy_key
+
+    specs = load_corpus("taxi", rounds=(1, 2))
+    folds = list(new_writer_folds(specs))
+    round2 = {s.writer for s in specs if s.round == 2}
+    assert len(folds) == len(round2) == 4
+    for train, test in folds:
+        (writer,) = {specs[i].writer for i in test}
+        assert writer in round2 and all(specs[i].writer != writer for i in train)
+        held = {policy_key("taxi", specs[i].tree) for i in test}
+        assert not held & {policy_key("taxi", specs[i].tree) for i in train}
+        assert len(train) + len(test) >= len(specs) - 3  # only a few other specs share a held-out policy

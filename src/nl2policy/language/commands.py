@@ -132,7 +132,8 @@ def parse_plan(plan: str, domains: list[str], default_model: str) -> list[tuple[
     """'model:protocols;...' -> (domain, model, protocol, repeats) steps, in plan order. A model
     prefixed with 'DOMAIN/' runs for that domain only (a probe of one domain must not be listed as
     not run in the others); protocols are cvR (R repeats of 5-fold CV), treesR (R repeats of
-    5-fold leave-trees-out on both corpus rounds) and writers."""
+    5-fold leave-trees-out on both corpus rounds), writers and new (each round-2 writer held out
+    with every policy they describe)."""
     from nl2policy.language.models.config import MODELS
 
     alias = {"best": default_model, "single": "seq2tree-minilm-synth", "ablation": "seq2tree-minilm"}
@@ -146,14 +147,14 @@ def parse_plan(plan: str, domains: list[str], default_model: str) -> list[tuple[
         if only and only not in domains:
             raise ValueError(f"plan part {part!r}: {only!r} is not one of the --domain options {domains}")
         for p in protocols.split(","):
-            if p == "writers":
-                protocol, repeats = "writers", 1
+            if p in ("writers", "new"):
+                protocol, repeats = p, 1
             elif p.startswith("cv") and (p[2:] or "1").isdigit():
                 protocol, repeats = "cv", int(p[2:] or 1)
             elif p.startswith("trees") and (p[5:] or "1").isdigit():
                 protocol, repeats = "trees", int(p[5:] or 1)
             else:
-                raise ValueError(f"plan part {part!r}: protocol {p!r} is not cvR, treesR or writers")
+                raise ValueError(f"plan part {part!r}: protocol {p!r} is not cvR, treesR, writers or new")
             steps += [(d, name, protocol, repeats) for d in domains if not only or d == only]
     return steps
 
@@ -181,7 +182,7 @@ def translation_experiment(
     import torch
 
     from nl2policy.console import console, domain_or_fail, err
-    from nl2policy.language.evaluate import run_experiment
+    from nl2policy.language.evaluate import fold_count, run_experiment
     from nl2policy.language.summary import summarize
     from nl2policy.language.models.config import DEFAULT_MODEL
 
@@ -206,5 +207,5 @@ def translation_experiment(
                                  "augmentation/synthetic seed 0 (with member_draws, member m: seed m); "
                                  "both shifted by a model's seed_offset where it has one; "
                                  "epochs, data and beam per model in nl2policy/language/models/config.py",
-                   planned=[(d, name, protocol, 5 * repeats if protocol == "cv" else 4) for d, name, protocol, repeats in steps])
+                   planned=[(d, name, protocol, fold_count(protocol, repeats)) for d, name, protocol, repeats in steps])
     console.print(md.read_text())

@@ -26,6 +26,7 @@ class Spec:
     writer: str
     tree: Tree
     description: str
+    round: int = 1  # the collection round (ROUND_FOLDERS)
 
 
 ROUND_FOLDERS = {1: ".", 2: "round2"}
@@ -41,10 +42,10 @@ def load_corpus(domain: str, folder: Optional[Path] = None, rounds: Sequence[int
     if unknown:
         raise ValueError(f"no collection round {unknown[0]}; rounds: {sorted(ROUND_FOLDERS)}")
     return [spec for r in rounds for spec in _load_file((folder or corpus_dir()) / ROUND_FOLDERS[r] / f"{domain}.jsonl",
-                                                       domain)]
+                                                       domain, r)]
 
 
-def _load_file(path: Path, domain: str) -> list[Spec]:
+def _load_file(path: Path, domain: str, round_: int = 1) -> list[Spec]:
     vocab = get_domain(domain).vocab
     specs = []
     for lineno, line in enumerate(path.read_text().splitlines(), 1):
@@ -53,7 +54,7 @@ def _load_file(path: Path, domain: str) -> list[Spec]:
         try:
             row = json.loads(line)
             tree = parse_tree(row["tree"], vocab)
-            specs.append(Spec(row["id"], row["domain"], row["writer"], tree, row["description"]))
+            specs.append(Spec(row["id"], row["domain"], row["writer"], tree, row["description"], round_))
         except (json.JSONDecodeError, KeyError, TreeError) as exc:
             raise ValueError(f"{path}:{lineno}: {exc}") from exc
     return specs
@@ -71,6 +72,18 @@ def policy_key(domain: str, tree: Tree) -> tuple[str, ...]:
     answer set): two trees with the same key are the same policy, however they are drawn."""
     d = get_domain(domain)
     return tuple(tree.act(answers) for answers in d.possible_answer_sets)
+
+
+def new_writer_folds(specs: Sequence[Spec]) -> Iterator[Split]:
+    """One fold per writer of round 2: that writer's specs are the test set, and training is
+    every other spec whose policy none of them has. The test writer is new and so are the test
+    trees: the case of a real user, which neither leave-writers-out (round 1's writers share
+    trees) nor leave-trees-out (the writers are seen) measures alone."""
+    for writer in writers([s for s in specs if s.round == 2]):
+        test = [i for i, s in enumerate(specs) if s.writer == writer]
+        held = {policy_key(specs[i].domain, specs[i].tree) for i in test}
+        train = [i for i, s in enumerate(specs) if s.writer != writer and policy_key(s.domain, s.tree) not in held]
+        yield train, test
 
 
 def kfold(specs: Sequence[Spec], k: int = 5, seed: int = 0, by_writer: bool = False,

@@ -44,9 +44,21 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
     names = model.tree_tokens
     index = {t: i for i, t in enumerate(names)}
     is_action = torch.tensor([t in vocab.actions for t in names])
-    leaf_cost, mention_cost, question_cost, rule_cost, root_cost = (
-        model.decoding(c) for c in ("leaf_cost", "mention_cost", "question_cost", "rule_cost", "root_cost"))
+    leaf_cost, mention_cost, question_cost, rule_cost, root_cost, findings_cost = (
+        model.decoding(c) for c in ("leaf_cost", "mention_cost", "question_cost", "rule_cost", "root_cost",
+                                    "findings_cost"))
     B, K = len(texts), max(1, model.beam or model.cfg.beam)
+    found = model.findings.read(texts) if findings_cost and model.findings is not None else None
+    if found is not None:
+        # a tree's findings term, log P(its question set, action set, root), split over the search:
+        # a label's log P(present) when a node first uses it, the root's log-probability at the
+        # first step, and log P(absent) of every label it never used once it is finished; so the
+        # beam compares hypotheses by (nearly) what they will finally be scored by
+        present = torch.tensor([[math.log(max(f.asks.get(t, f.takes.get(t, 1.0)), 1e-6)) for t in names] for f in found])
+        absent = torch.tensor([[math.log(max(1 - f.asks.get(t, f.takes.get(t, 0.0)), 1e-6)) for t in names] for f in found])
+        root_prior = torch.tensor([[math.log(max(f.root.get(t, 0.0), 1e-6)) for t in names] for f in found])
+        used = torch.zeros(B * K, len(names), dtype=torch.bool)
+        charged = torch.zeros(B * K, dtype=torch.bool)
     state = DecoderState(model, batch, copies=K)
     prefixes: list[list[str]] = [[] for _ in range(B * K)]
     probs: list[dict[int, float]] = [{} for _ in range(B * K)]
@@ -74,6 +86,10 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
         logits = state.step(parent, branch)  # (members, B*K, tokens)
         p = torch.softmax(logits.masked_fill(~mask, -1e9), -1).mean(0)
         done = torch.tensor([s is None for s in slots])
+        if found is not None:  # hypotheses that have just finished pay for the labels they never used
+            fresh = done & ~charged
+            score = score + findings_cost * (absent.repeat_interleave(K, 0) * ~used * fresh[:, None]).sum(-1).view(B, K)
+            charged = charged | done
         logp = torch.where(mask, p.clamp(min=1e-12).log(), torch.tensor(-math.inf))
         if leaf_cost:
             early = (mask & ~is_action).any(-1, keepdim=True)  # a question was allowed here
@@ -83,6 +99,10 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
                 first = first_question(model.domain, text)
                 if first is not None:
                     logp[b * K:(b + 1) * K] -= root_cost * (torch.arange(len(names)) != index[first])
+        if found is not None:  # the learned findings, paid as the tree takes shape (findings.py)
+            logp = logp + findings_cost * present.repeat_interleave(K, 0) * ~used
+            if step == 0:
+                logp = logp + findings_cost * root_prior.repeat_interleave(K, 0)
         logp[done] = torch.where(mask[done], 0.0, -math.inf)
         total = (score.view(B * K, 1) + logp).view(B, K * len(names))
         best, flat = total.topk(K, -1)  # ties keep the lower index: greedy's argmax when K = 1
@@ -97,7 +117,13 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
                 probs[r][slots[src].grid] = float(p[src, c])
         state.reorder(source)
         state.push(choice)
+        if found is not None:
+            used, charged = used[source].clone(), charged[source]
+            live = torch.tensor([slots[src] is not None for src in source.tolist()])
+            used[torch.arange(B * K)[live], choice[live]] = True
     trees = [from_tokens(p, vocab) if p and next_slot(p, vocab) is None else None for p in prefixes]
+    if found is not None:  # those that finished at the last step
+        score = score + findings_cost * (absent.repeat_interleave(K, 0) * ~used * ~charged[:, None]).sum(-1).view(B, K)
     # the final choice's checks: (cost, what the text names, what of it a tree leaves out)
     asked = partial(named_questions, forms=model.cfg.question_forms)
     stated = partial(stated_rules, forms=model.cfg.rule_forms)

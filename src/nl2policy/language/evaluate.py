@@ -17,7 +17,7 @@ from typing import Callable, Optional, Sequence
 import torch
 
 from nl2policy.domains import get_domain
-from nl2policy.language.corpus import Spec, kfold, load_corpus
+from nl2policy.language.corpus import Spec, kfold, load_corpus, new_writer_folds
 from nl2policy.language.dataset import member_pairs
 from nl2policy.language.models.config import MODELS, networks_config
 from nl2policy.language.models.pretrained import MiniLMCache
@@ -129,19 +129,28 @@ def machine() -> str:
     return f"{model or platform.machine()}, {'avx512' if 'avx512f' in flags else 'no avx512'}"
 
 
-PROTOCOL_ROUNDS = {"cv": (1,), "writers": (1,), "trees": (1, 2)}
+PROTOCOL_ROUNDS = {"cv": (1,), "writers": (1,), "trees": (1, 2), "new": (1, 2)}
 """The corpus rounds each protocol runs on: the paper's protocol and leave-writers-out on round
-1, as before; leave-trees-out on both rounds (round 2's trees are all new to round 1)."""
+1, as before; leave-trees-out and new writers with new trees on both rounds (round 2's trees
+are all new to round 1)."""
+
+
+def fold_count(protocol: str, repeats: int) -> int:
+    """Folds a protocol runs: 5 per repeat (cv, trees), 4 writer folds (writers, new)."""
+    return 5 * repeats if protocol in ("cv", "trees") else 4
 
 
 def plan_folds(specs: Sequence[Spec], protocol: str, repeats: int) -> list[tuple[str, list[int], list[int]]]:
     """(fold key, train, test). "cv": 5 folds x `repeats` (fold seed = repeat); "writers":
-    4 folds of 2 held-out writers each; "trees": 5 folds x `repeats` of held-out policies."""
+    4 folds of 2 held-out writers each; "trees": 5 folds x `repeats` of held-out policies; "new":
+    one fold per round-2 writer, whose specs' policies training never has (new_writer_folds)."""
     if protocol == "cv":
         return [(f"cv-r{r}-f{f}", tr, te) for r in range(repeats) for f, (tr, te) in enumerate(kfold(specs, 5, seed=r))]
     if protocol == "trees":
         return [(f"trees-r{r}-f{f}", tr, te) for r in range(repeats)
                 for f, (tr, te) in enumerate(kfold(specs, 5, seed=r, by_tree=True))]
+    if protocol == "new":
+        return [(f"new-f{f}", tr, te) for f, (tr, te) in enumerate(new_writer_folds(specs))]
     return [(f"writers-f{f}", tr, te) for f, (tr, te) in enumerate(kfold(specs, 4, seed=0, by_writer=True))]
 
 

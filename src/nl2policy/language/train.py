@@ -19,6 +19,7 @@ import torch
 from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.language.grammar import allowed_tokens, next_slot
 from nl2policy.language.decoding import beam_search, preorder_slots
+from nl2policy.language.findings import FindingsModel
 from nl2policy.language.members import MemberCheckpoints, train_forked
 from nl2policy.language.models.config import ModelConfig
 from nl2policy.language.models.network import Batch, Translator
@@ -56,6 +57,8 @@ class TrainedTranslator:
     question_cost: Optional[float] = None  # decoding cost of an asked question the tree lacks (see ModelConfig); None: the config's
     rule_cost: Optional[float] = None  # decoding cost of a stated rule the tree breaks (see ModelConfig); None: the config's
     root_cost: Optional[float] = None  # decoding cost of a root other than the stated first question; None: the config's
+    findings_cost: Optional[float] = None  # weight of the learned findings in decoding (see ModelConfig); None: the config's
+    findings: Optional["FindingsModel"] = field(default=None, repr=False)  # the learned findings (language/findings.py)
     ensemble: Optional[int] = None  # decode with the first n networks only; None: all of them
     stack_members: bool = True  # flat encoders: decode all members as one batch (False: one by one, same result)
 

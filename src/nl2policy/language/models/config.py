@@ -37,6 +37,7 @@ class ModelConfig:
     rule_cost: float = 0.0  # decoding: nats the final choice pays per rule the text states that the tree breaks (stated_rules.py)
     rule_forms: str = "plain"  # which statements those rules are read from (stated_rules.RULE_FORMS)
     root_cost: float = 0.0  # decoding: nats a tree pays for a root other than the question the text says to ask first
+    findings_cost: float = 0.0  # decoding: weight of the learned findings' log-agreement (language/findings.py)
     other_domains: bool = False  # also train on the other domains' real descriptions (dataset.borrowed_pairs; tree decoder)
 
     def to_dict(self) -> dict:
@@ -44,7 +45,7 @@ class ModelConfig:
 
 
 DECODING_FIELDS = ("ensemble", "beam", "leaf_cost", "mention_cost", "question_cost", "question_forms", "rule_cost",
-                   "rule_forms", "root_cost")
+                   "rule_forms", "root_cost", "findings_cost")
 """The settings that change only how trained networks are decoded (`ensemble`: how many of them)."""
 
 
