@@ -26,7 +26,7 @@ def main() -> None:
     parser.add_argument("--out", default=None, help="Also write the report to this file")
     args = parser.parse_args()
     from nl2policy.language.corpus import load_corpus
-    from nl2policy.language.evaluate import machine
+    from experiments.translation.evaluate import machine
     from nl2policy.language.models.pretrained import MAX_PIECES, _forward, _HiddenStates, _load
 
     tokenizer = _load(6, True)[0]

@@ -46,7 +46,7 @@ def main() -> None:
     default_threads = torch.get_num_threads()
     torch.set_num_threads(args.threads)
     from nl2policy.language.corpus import load_corpus
-    from nl2policy.language.evaluate import machine
+    from experiments.translation.evaluate import machine
     from nl2policy.language.dataset import training_pairs
     from nl2policy.language.members import default_workers
     from nl2policy.language.models.pretrained import encode_tokens

@@ -51,15 +51,6 @@ def test_unknown_domain_exits_nonzero():
     assert out.exit_code == 2 and "unknown domain 'boat'" in out.output
 
 
-def test_translation_experiment_rejects_a_bad_plan_or_nothing_to_summarise(tmp_path):
-    out = runner.invoke(app, ["translation-experiment", "--domain", "taxi", "--plan", "seq2seq:cv2x", "--out", str(tmp_path)])
-    assert out.exit_code == 2 and "protocol 'cv2x' is not cvR, treesR or writers" in out.output
-    out = runner.invoke(app, ["translation-experiment", "--domain", "taxi", "--plan", "seq2seq:cv1", "--out",
-                              str(tmp_path / "empty"), "--summarize-only"])
-    assert out.exit_code == 2 and "no folds to summarise" in out.output
-    assert not (tmp_path / "empty").exists()  # nothing written
-
-
 def test_installed_entry_point_runs():
     proc = subprocess.run([sys.executable, "-m", "nl2policy.cli", "evaluate", "--domain", "taxi", "--tree", GOOD,
                            "--episodes", "3"], capture_output=True, text=True, timeout=120)

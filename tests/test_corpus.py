@@ -100,8 +100,8 @@ def test_leave_trees_out_folds_hold_whole_policies_out():
 
 
 def test_leave_trees_out_protocol_plans_five_folds_a_repeat_on_both_rounds():
-    from nl2policy.language.commands import parse_plan
-    from nl2policy.language.evaluate import PROTOCOL_ROUNDS, plan_folds
+    from experiments.translation.__main__ import parse_plan
+    from experiments.translation.evaluate import PROTOCOL_ROUNDS, plan_folds
 
     specs = load_corpus("highway", rounds=PROTOCOL_ROUNDS["trees"])
     folds = plan_folds(specs, "trees", 2)

@@ -11,7 +11,7 @@ from nl2policy.language.grammar import allowed_tokens, next_slot
 from nl2policy.language.models.config import MODELS
 from nl2policy.language.models.network import Translator
 from nl2policy.language.text import WordVocab
-from nl2policy.language.train import TrainedTranslator
+from nl2policy.language.translator import TrainedTranslator
 from nl2policy.trees import from_tokens, to_tokens
 from nl2policy.trees.parse import validate
 

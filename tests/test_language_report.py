@@ -5,9 +5,28 @@ import json
 
 import pytest
 
-from nl2policy.language.evaluate import held_out_writers
-from nl2policy.language.reproduction import machine_kinds
-from nl2policy.language.summary import summarize
+from experiments.translation.evaluate import held_out_writers
+from experiments.translation.reproduction import machine_kinds
+from experiments.translation.summary import summarize
+
+
+@pytest.fixture
+def history_models(monkeypatch):
+    """The default's past decodings (deleted from the config with the variants that lost), as the
+    recorded folds name them: the summary and its reproduction checks read such records."""
+    from nl2policy.language.models.config import MODELS, X4_MENTIONS
+
+    base = "seq2tree-minilm-synth-x4-mentions"
+    chain = {base + "-questions": dataclasses.replace(X4_MENTIONS, question_cost=1.0),
+             base + "-questions-ext": dataclasses.replace(X4_MENTIONS, question_cost=2.0, question_forms="extended"),
+             base + "-questions-ext-rules": dataclasses.replace(X4_MENTIONS, question_cost=2.0, question_forms="extended",
+                                                                rule_cost=100.0),
+             base + "-questions-ext-rules-ext": dataclasses.replace(X4_MENTIONS, question_cost=2.0, question_forms="extended",
+                                                                    rule_cost=100.0, rule_forms="extended"),
+             "seq2tree-minilm-synth-x6-mentions": dataclasses.replace(X4_MENTIONS, ensemble=6)}
+    for name, cfg in chain.items():
+        monkeypatch.setitem(MODELS, name, cfg)
+    return chain
 
 
 def _run(domain, model, fold, protocol, tree_acc):
@@ -39,7 +58,7 @@ def test_summary_reports_mean_std_per_writer_pair_and_unfinished_rows(tmp_path):
 
 
 def test_experiment_never_runs_a_fold_twice(tmp_path, monkeypatch):
-    from nl2policy.language import evaluate
+    from experiments.translation import evaluate
 
     calls, workers = [], set()
 
@@ -103,7 +122,7 @@ def test_summary_pools_confidence_calibration_over_folds(tmp_path):
 
 def test_unseen_trees_are_the_test_trees_no_training_description_has():
     from nl2policy.language.corpus import load_corpus
-    from nl2policy.language.evaluate import unseen_trees
+    from experiments.translation.evaluate import unseen_trees
     from nl2policy.trees import to_tokens
 
     specs = load_corpus("taxi")
@@ -135,7 +154,7 @@ def test_fold_result_counts_confident_and_unsure_translations(monkeypatch, one_t
 
     import torch
 
-    from nl2policy.language import evaluate
+    from experiments.translation import evaluate
     from nl2policy.language.corpus import load_corpus
     from nl2policy.language.models.config import MODELS
     from nl2policy.language.models.pretrained import MiniLMCache
@@ -179,13 +198,13 @@ def test_summary_sets_each_decoding_choice_beside_the_same_folds_without_it(tmp_
 def test_fold_result_with_a_beam_and_decoding_costs_also_records_decoding_without_them(monkeypatch, one_torch_thread):
     import dataclasses
 
-    from nl2policy.language import evaluate
+    from experiments.translation import evaluate
     from nl2policy.language.corpus import load_corpus
     from nl2policy.language.models.config import MODELS
     from nl2policy.language.models.pretrained import MiniLMCache
     from nl2policy.trees import to_tokens
 
-    monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=2, beam=3, leaf_cost=100.0,
+    monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["smoke"], epochs=2, beam=3, root_cost=100.0,
                                                             mention_cost=100.0))
     specs = load_corpus("taxi")[:40]
     r = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
@@ -193,12 +212,12 @@ def test_fold_result_with_a_beam_and_decoding_costs_also_records_decoding_withou
     # the same training without one of the costs (same seed, same networks) scores what the fold
     # recorded as "without" it
     without = {}
-    for cost in ("leaf_cost", "mention_cost"):
+    for cost in ("root_cost", "mention_cost"):
         monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["tiny"], **{cost: 0.0}))
         without[cost] = evaluate.run_fold("taxi", specs, list(range(30)), list(range(30, 40)), "tiny", 0, MiniLMCache())
         assert without[cost]["tree_acc"] == r[f"no_{cost}_tree_acc"] and f"no_{cost}_tree_acc" not in without[cost]
         monkeypatch.setitem(MODELS, "tiny", dataclasses.replace(MODELS["tiny"], **{cost: 100.0}))
-    assert without["leaf_cost"]["token_acc"] != r["token_acc"]  # a prohibitive leaf cost (full trees only) changed the trees
+    assert without["root_cost"]["token_acc"] != r["token_acc"]  # a prohibitive root cost (the stated first question) changed the trees
 
 
 def test_summary_sets_each_variant_of_the_default_beside_it_on_the_folds_both_ran(tmp_path, monkeypatch):
@@ -233,7 +252,7 @@ def test_summary_sets_each_variant_of_the_default_beside_it_on_the_folds_both_ra
 def test_fold_result_of_a_larger_ensemble_also_records_its_first_three_members(monkeypatch, one_torch_thread):
     import dataclasses
 
-    from nl2policy.language import evaluate
+    from experiments.translation import evaluate
     from nl2policy.language.corpus import load_corpus
     from nl2policy.language.models.config import MODELS
     from nl2policy.language.models.pretrained import MiniLMCache
@@ -246,7 +265,7 @@ def test_fold_result_of_a_larger_ensemble_also_records_its_first_three_members(m
     assert r["first_3_members_tree_acc"] == three["tree_acc"] and "first_3_members_tree_acc" not in three
 
 
-def test_machines_whose_folds_retrain_the_same_networks_count_as_one_kind(tmp_path):
+def test_machines_whose_folds_retrain_the_same_networks_count_as_one_kind(tmp_path, history_models):
     from nl2policy.language.models.config import DEFAULT_NETWORKS as base, MODELS
 
     six = next(name for name, cfg in MODELS.items() if cfg == dataclasses.replace(MODELS[base], ensemble=6))
@@ -268,7 +287,7 @@ def test_machines_whose_folds_retrain_the_same_networks_count_as_one_kind(tmp_pa
     assert "A with B 4 of 5" in md and "one kind of CPU" not in md and "## Variants" not in md
 
 
-def test_decoding_choices_name_the_model_whose_config_the_smaller_decoding_is(tmp_path, monkeypatch):
+def test_decoding_choices_name_the_model_whose_config_the_smaller_decoding_is(tmp_path, monkeypatch, history_models):
     from nl2policy.language.models.config import DEFAULT_NETWORKS as base, MODELS
 
     six = next(name for name, cfg in MODELS.items() if cfg == dataclasses.replace(MODELS[base], ensemble=6))
@@ -290,7 +309,7 @@ def test_too_few_agreeing_folds_do_not_make_one_kind():
 
 
 def test_plan_names_models_protocols_and_optionally_one_domain():
-    from nl2policy.language.commands import parse_plan
+    from experiments.translation.__main__ import parse_plan
     from nl2policy.language.models.config import DEFAULT_MODEL
 
     steps = parse_plan("best:writers,cv3;taxi/seq2seq:cv1", ["taxi", "highway"], DEFAULT_MODEL)
@@ -301,11 +320,11 @@ def test_plan_names_models_protocols_and_optionally_one_domain():
             parse_plan(bad, ["taxi"], DEFAULT_MODEL)
 
 
-def test_without_its_question_check_a_model_decodes_as_its_networks_plain_model():
+def test_without_its_question_check_a_model_decodes_as_its_networks_plain_model(history_models):
     """Which patterns a question check uses changes nothing once the check is off, so the extended
     check's folds, decoded without it, are the default networks' folds (a reproduction check)."""
     from nl2policy.language.models.config import DEFAULT_NETWORKS
-    from nl2policy.language.reproduction import decoded_as
+    from experiments.translation.reproduction import decoded_as
 
     ext = "seq2tree-minilm-synth-x4-mentions-questions-ext"
     assert decoded_as(ext, "no_question_cost_tree_acc") == [DEFAULT_NETWORKS]
@@ -319,10 +338,10 @@ def test_without_its_question_check_a_model_decodes_as_its_networks_plain_model(
     assert decoded_as(rules_ext + "-root", "no_root_cost_tree_acc") == [rules_ext]
 
 
-def test_summary_marks_folds_that_decoded_another_models_networks_and_checks_no_reproduction_with_them(tmp_path):
+def test_summary_marks_folds_that_decoded_another_models_networks_and_checks_no_reproduction_with_them(tmp_path, history_models):
     """A fold that decoded saved networks (--networks-from) retrained nothing: its seconds are
     decoding only, and it is no evidence that training reproduces."""
-    from nl2policy.language.reproduction import reproduction_checks
+    from experiments.translation.reproduction import reproduction_checks
 
     ext = "seq2tree-minilm-synth-x4-mentions-questions-ext"
     runs = [dict(_run("taxi", ext, "cv-r0-f0", "cv", 0.5), machine="cpu x"),
@@ -343,7 +362,7 @@ def test_a_fold_can_decode_the_networks_another_model_trained_on_it(monkeypatch,
     saved networks of the same fold, and scores what training them anew gives."""
     import dataclasses
 
-    from nl2policy.language import evaluate
+    from experiments.translation import evaluate
     from nl2policy.language.corpus import load_corpus
     from nl2policy.language.models.config import MODELS
     from nl2policy.language.models.pretrained import MiniLMCache
@@ -362,3 +381,20 @@ def test_a_fold_can_decode_the_networks_another_model_trained_on_it(monkeypatch,
     trained = evaluate.run_fold("taxi", specs, train, test, "tiny-first", 0, MiniLMCache())
     for key in ("tree_acc", "token_acc", "errors", "greedy_tree_acc"):
         assert reused[key] == trained[key]
+
+
+def test_translation_experiment_rejects_a_bad_plan_or_nothing_to_summarise(tmp_path):
+    """The lab's command line (python -m experiments.translation): bad input is a one-line error."""
+    import typer
+    from typer.testing import CliRunner
+
+    from experiments.translation.__main__ import translation_experiment
+
+    lab, runner = typer.Typer(), CliRunner()
+    lab.command()(translation_experiment)
+    out = runner.invoke(lab, ["--domain", "taxi", "--plan", "seq2seq:cv2x", "--out", str(tmp_path)])
+    assert out.exit_code == 2 and "protocol 'cv2x' is not cvR, treesR, writers or new" in " ".join(out.output.split())
+    out = runner.invoke(lab, ["--domain", "taxi", "--plan", "seq2seq:cv1", "--out",
+                              str(tmp_path / "empty"), "--summarize-only"])
+    assert out.exit_code == 2 and "no folds to summarise" in out.output
+    assert not (tmp_path / "empty").exists()  # nothing written

@@ -16,16 +16,16 @@ from nl2policy.language.train import fit
 from nl2policy.trees import to_tokens
 
 
-@pytest.mark.parametrize("name", [DEFAULT_MODEL, "seq2tree-minilm-synth-x3-swap"])
+@pytest.mark.parametrize("name", [DEFAULT_MODEL, "seq2tree-minilm"])
 def test_fold_training_data_reads_only_training_indices(monkeypatch, name):
     specs = load_corpus("taxi")
     train, test = next(kfold(specs, 5, seed=0))
     touched = []
     real_augment = dataset.augment_fold
 
-    def spy(specs_, idx, copies, seed=0, swap=False):
+    def spy(specs_, idx, copies, seed=0):
         touched.extend(idx)
-        return real_augment(specs_, idx, copies, seed, swap)
+        return real_augment(specs_, idx, copies, seed)
 
     monkeypatch.setattr(dataset, "augment_fold", spy)
     pairs = training_pairs("taxi", specs, train, MODELS[name])
@@ -56,26 +56,6 @@ def test_tiny_training_run_learns_two_simple_trees(one_torch_thread):
     assert model.history[-1] < model.history[0] / 4
     preds = [t for t, _ in model.predict([s.description for s in subset])]
     assert sum(p == s.tree for p, s in zip(preds, subset)) >= 14
-
-
-def test_path_decoder_learns_two_simple_trees_and_outputs_valid_trees(one_torch_thread):
-    """The path-conditioned node classifier (models/pathnet.py) trains and decodes valid trees."""
-    from nl2policy.domains import get_domain
-    from nl2policy.trees.parse import validate
-
-    torch.manual_seed(0)
-    specs = load_corpus("taxi")
-    wanted = {("has_passenger", "go_airport", "go_city"), ("heavy_traffic", "go_village", "go_city")}
-    subset = [s for s in specs if tuple(to_tokens(s.tree)) in wanted]
-    cfg = dataclasses.replace(MODELS["pathnet-minilm"], minilm=False, epochs=25, hidden=32, embed=32, dropout=0.0,
-                              batch=8, aug_copies=0)
-    model = fit("taxi", "tiny-path", cfg, [(s.description, s.tree) for s in subset], seed=0)
-    assert model.history[-1] < model.history[0] / 4
-    results = model.predict([s.description for s in subset] + [s.description for s in specs[:30]])
-    assert sum(t == s.tree for (t, _), s in zip(results, subset)) >= 14
-    for tree, probs in results:
-        validate(tree, get_domain("taxi").vocab)
-        assert probs and all(0.0 <= p <= 1.0 for p in probs.values())
 
 
 def test_learning_rate_decays_smoothly_from_base_to_floor():
@@ -125,7 +105,7 @@ def test_ensemble_averages_members_and_resumes_from_a_checkpoint(one_torch_threa
     assert resumed.history == full.history
     from nl2policy.domains import get_domain
     from nl2policy.language.grammar import allowed_tokens, next_slot
-    from nl2policy.language.train import collate
+    from nl2policy.language.translator import collate
 
     texts = [s.description for s in subset[:8]]
     vocab = get_domain("taxi").vocab
@@ -136,7 +116,7 @@ def test_ensemble_averages_members_and_resumes_from_a_checkpoint(one_torch_threa
         for net in full.nets:
             memory = net.encode(batch)
             B = len(texts)
-            _, _, logits, _ = net.run_step(memory, [memory["h0"]], [torch.zeros(B, net.out.in_features - cfg.hidden)],
+            _, _, logits = net.run_step(memory, [memory["h0"]], [torch.zeros(B, net.out.in_features - cfg.hidden)],
                                         [torch.full((B,), net.start_id)], torch.full((B,), -1), torch.zeros(B, dtype=torch.long))
             root.append(torch.softmax(logits.masked_fill(~root_ok, -1e9), -1))
     mean = (root[0] + root[1]) / 2
@@ -209,51 +189,40 @@ def test_a_seed_offset_is_another_training_run_of_the_same_recipe(one_torch_thre
         assert not all(torch.equal(p, q) for p, q in zip(na.parameters(), nc.parameters()))
 
 
-@pytest.mark.parametrize("name,coverage", [("seq2tree", False), ("seq2seq", False), ("seq2tree", True)])
-def test_stacked_decoder_step_equals_each_members_own_step(name, coverage, one_torch_thread):
+@pytest.mark.parametrize("name", ["seq2tree", "seq2seq"])
+def test_stacked_decoder_step_equals_each_members_own_step(name, one_torch_thread):
     from nl2policy.language.models.network import StackedDecoder, Translator
 
     torch.manual_seed(0)
-    cfg = dataclasses.replace(MODELS[name], hidden=24, embed=12, coverage=coverage)
-    nets = [Translator(cfg, 30, 10, 6).eval() for _ in range(3)]
-    for net in nets:  # a trained network's coverage weights are not the fresh zeros: make them count
-        if coverage:
-            torch.nn.init.normal_(net.unread_scale)
+    cfg = dataclasses.replace(MODELS[name], hidden=24, embed=12)
+    nets = [Translator(cfg, 30, 10).eval() for _ in range(3)]
     B, N, h, mem = 4, 7, 24, 48
     words, mask = torch.randn(3, B, N, mem), torch.rand(B, N) > 0.3
     mask[:, 0] = True
     h_prev, h_parent = torch.randn(3, B, h), torch.randn(3, B, h)
-    ctx_prev = torch.randn(3, B, 2 * mem if coverage else mem)
-    cov = torch.rand(3, B, N) * 3 * mask if coverage else None
+    ctx_prev = torch.randn(3, B, mem)
     prev_tok, parent_tok, branch = torch.tensor([10, 2, 3, 4]), torch.tensor([10, 10, 1, 2]), torch.tensor([0, 1, 2, 1])
     with torch.inference_mode():
-        got = StackedDecoder(nets).step(words, mask, h_prev, ctx_prev, prev_tok, h_parent, parent_tok, branch, cov)
-        assert (got[3] is None) == (not coverage)
+        got = StackedDecoder(nets).step(words, mask, h_prev, ctx_prev, prev_tok, h_parent, parent_tok, branch)
         for e, net in enumerate(nets):
             want = net.step({"words": words[e], "mask": mask}, h_prev[e], ctx_prev[e], prev_tok, h_parent[e], parent_tok,
-                            branch, None if cov is None else cov[e])
-            for g, w in zip(got, want):
-                if w is not None:
-                    assert torch.allclose(g[e], w, atol=1e-5)
-        if coverage:  # each step adds its attention distribution: one unit, on the text's words only
-            added = got[3] - cov
-            assert torch.allclose(added.sum(-1), torch.ones(3, B), atol=1e-5) and bool((added[:, ~mask] == 0).all())
+                            branch)
+            for g, w in zip(got, want, strict=True):
+                assert torch.allclose(g[e], w, atol=1e-5)
 
 
-@pytest.mark.parametrize("word_rnn", [True, False])
-def test_stacked_encoder_equals_each_members_own_encoder(word_rnn, one_torch_thread):
+def test_stacked_encoder_equals_each_members_own_encoder(one_torch_thread):
     """On a padded batch (texts of 7, 3, 1 and 5 words): the stacked BiGRU reads each text from
     its own last word backwards and leaves zeros after it, as the packed nn.GRU does."""
     from nl2policy.language.models.network import Batch, StackedEncoder, Translator
 
     torch.manual_seed(0)
-    cfg = dataclasses.replace(MODELS["seq2tree"], hidden=24, embed=12, word_rnn=word_rnn)
-    nets = [Translator(cfg, 30, 10, 6).eval() for _ in range(3)]
+    cfg = dataclasses.replace(MODELS["seq2tree"], hidden=24, embed=12)
+    nets = [Translator(cfg, 30, 10).eval() for _ in range(3)]
     lengths = torch.tensor([7, 3, 1, 5])
     inside = torch.arange(7)[None] < lengths[:, None]
     words = torch.randint(1, 30, (4, 7)) * inside
-    batch = Batch(words, lengths, None, torch.zeros(4, 1, 7, dtype=torch.long), lengths[:, None], torch.zeros(4, 7, dtype=torch.long),
-                  torch.ones(4, dtype=torch.long))
+    batch = Batch(words, lengths, None, torch.zeros(4, 1, 7, dtype=torch.long), lengths[:, None], torch.ones(4, dtype=torch.long))
     with torch.inference_mode():
         got = StackedEncoder(nets).encode(batch)
         for g, net in zip(got, nets, strict=True):
@@ -261,14 +230,13 @@ def test_stacked_encoder_equals_each_members_own_encoder(word_rnn, one_torch_thr
             assert g.keys() == want.keys()
             for k in want:
                 assert torch.allclose(g[k], want[k], atol=1e-6), k
-        if word_rnn:
-            assert bool((got[0]["words"][~inside] == 0).all()) and bool((got[0]["words"][inside] != 0).any())
+        assert bool((got[0]["words"][~inside] == 0).all()) and bool((got[0]["words"][inside] != 0).any())
 
 
-@pytest.mark.parametrize("beam,coverage", [(1, False), (3, False), (3, True)])
-def test_stacked_and_member_by_member_decoding_give_the_same_translations(beam, coverage, one_torch_thread):
+@pytest.mark.parametrize("beam", [1, 3])
+def test_stacked_and_member_by_member_decoding_give_the_same_translations(beam, one_torch_thread):
     specs = load_corpus("highway")
-    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, ensemble=3, coverage=coverage)
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, ensemble=3)
     model = fit("highway", "ens", cfg, [(s.description, s.tree) for s in specs[:48]], seed=0)
     model.beam = beam
     texts = [s.description for s in specs[48:80]]
@@ -283,7 +251,8 @@ def test_stacked_and_member_by_member_decoding_give_the_same_translations(beam, 
 def _assert_teacher_forced(model, text: str, tree, probs: dict) -> float:
     """The node probabilities decoding reported for `tree` multiply to the probability teacher
     forcing gives that tree (a single network); returns that log-probability."""
-    from nl2policy.language.train import _targets, collate, gold_steps
+    from nl2policy.language.train import _targets, gold_steps
+    from nl2policy.language.translator import collate
 
     logp = sum(math.log(p) for p in probs.values())
     steps = gold_steps(tree, model.domain, model.tree_tokens)
@@ -333,28 +302,35 @@ def test_a_root_cost_puts_the_question_the_text_says_to_ask_first_at_the_root(on
     assert sum(a[0] != b[0] for a, b in zip(free, costed)) > 0  # the smoke model does not find all roots itself
 
 
-@pytest.mark.parametrize("coverage", [False, True])
-def test_early_leaf_cost_grows_trees_and_reports_the_networks_own_probabilities(coverage, one_torch_thread):
-    """The cost changes which tree the beam keeps, not the probabilities it reports: a prohibitive
-    cost fills every branch to the depth limit (15 tokens), a moderate one never shrinks the trees
-    on the whole, and the reported node probabilities stay the network's teacher-forced ones.
-    The grown trees also check the beam's reordering of every state, coverage included: a state
-    carried to the wrong hypothesis would report probabilities teacher forcing does not give
-    (the smoke model's own trees are single actions, where nothing is reordered)."""
+def test_findings_steer_the_beam_and_it_reports_the_networks_own_probabilities(one_torch_thread):
+    """Findings that say every question is asked grow the beam's trees, and the node
+    probabilities reported stay the networks' teacher-forced ones: a decoder state carried to
+    the wrong hypothesis when the beam reorders would report others (the smoke model's own trees
+    are single actions, where nothing is reordered). With no findings weight, decoding is as before."""
+    from nl2policy.domains import get_domain
+    from nl2policy.language.findings import Findings
+
     specs = load_corpus("highway")
-    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, beam=3, coverage=coverage)
+    vocab = get_domain("highway").vocab
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, beam=3)
     model = fit("highway", "one", cfg, [(s.description, s.tree) for s in specs[:48]], seed=0)
     texts = [s.description for s in specs[48:64]]
     size = lambda decoded: [len(to_tokens(t)) for t, _ in decoded]
     plain = model.predict(texts)
-    model.leaf_cost = 100.0
-    assert size(model.predict(texts)) == [15] * len(texts)
-    model.leaf_cost = 1.0
-    costly = model.predict(texts)
-    assert sum(size(costly)) > sum(size(plain))
-    for text, (tree, probs) in zip(texts, costly):
+    labels = list(vocab.question_ids) + list(vocab.action_ids)
+    every = Findings({q: 0.99 for q in vocab.question_ids}, {a: 0.5 for a in vocab.action_ids},
+                     {l: 1 / len(labels) for l in labels})
+
+    class Fixed:
+        def read(self, batch):
+            return [every for _ in batch]
+
+    model.findings, model.findings_cost = Fixed(), 1.0
+    steered = model.predict(texts)
+    assert sum(size(steered)) > sum(size(plain))
+    for text, (tree, probs) in zip(texts, steered):
         _assert_teacher_forced(model, text, tree, probs)
-    model.leaf_cost = None  # back to the config's (none): the plain decoding again
+    model.findings_cost = 0.0
     assert model.predict(texts) == plain
 
 

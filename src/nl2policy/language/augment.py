@@ -15,7 +15,6 @@ import zlib
 from typing import Sequence
 
 from nl2policy.language.corpus import Spec
-from nl2policy.language.counterfactual import swap_actions
 from nl2policy.trees import Tree
 
 # A small hand-made thesaurus for the words these descriptions use (our own list; WordNet is
@@ -114,17 +113,7 @@ def augment_text(text: str, key: str, copy: int, seed: int = 0) -> str:
     return style_noise(paraphrase(replace_synonyms(text, rng), rng), rng)
 
 
-def augment_fold(specs: Sequence[Spec], train_idx: Sequence[int], copies: int, seed: int = 0,
-                 swap: bool = False) -> list[tuple[str, Tree]]:
-    """Augmented (description, tree) pairs for the given TRAINING indices only. With `swap`,
-    each copy first has the actions its description names permuted in text and tree alike,
-    where counterfactual.swap_actions can account for every action the tree uses."""
-    out = []
-    for i in train_idx:
-        for c in range(copies):
-            text, tree = specs[i].description, specs[i].tree
-            if swap:
-                swap_rng = _rng(specs[i].id, c, seed + 7919)  # its own stream: the wording draws stay as without swap
-                text, tree = swap_actions(specs[i].domain, text, tree, swap_rng) or (text, tree)
-            out.append((augment_text(text, specs[i].id, c, seed), tree))
-    return out
+def augment_fold(specs: Sequence[Spec], train_idx: Sequence[int], copies: int, seed: int = 0) -> list[tuple[str, Tree]]:
+    """Augmented (description, tree) pairs for the given TRAINING indices only."""
+    return [(augment_text(specs[i].description, specs[i].id, c, seed), specs[i].tree)
+            for i in train_idx for c in range(copies)]

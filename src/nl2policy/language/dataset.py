@@ -1,7 +1,7 @@
 """What a translator trains on: one place that assembles a fold's training pairs.
 
 The real descriptions of the training indices, then (as the model config asks) their augmented
-copies, the synthetic pairs and the other domains' descriptions by the same writers. Only
+copies and the synthetic pairs. Only
 `train_idx` is ever read, so the cross-validation folds and the final model (all indices) are
 built the same way.
 """
@@ -10,9 +10,8 @@ from __future__ import annotations
 
 from typing import Callable, Sequence, Union
 
-from nl2policy.domains import DOMAINS
 from nl2policy.language.augment import augment_fold
-from nl2policy.language.corpus import Spec, load_corpus
+from nl2policy.language.corpus import Spec
 from nl2policy.language.models.config import ModelConfig
 from nl2policy.language.synthetic import synthetic_pairs
 from nl2policy.trees import Tree
@@ -21,30 +20,10 @@ from nl2policy.trees import Tree
 def training_pairs(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], cfg: ModelConfig,
                    seed: int = 0) -> list[tuple[str, Tree]]:
     pairs = [(specs[i].description, specs[i].tree) for i in train_idx]
-    pairs += augment_fold(specs, train_idx, cfg.aug_copies, seed, swap=cfg.aug_swap)
-    if cfg.synthetic or cfg.mutants:
-        pairs += synthetic_pairs(domain, cfg.synthetic, seed, [specs[i].tree for i in train_idx], cfg.synth_per_tree,
-                                 cfg.mutants)
-    if cfg.other_domains:
-        pairs += borrowed_pairs(domain, {specs[i].writer for i in train_idx}, cfg.aug_copies, seed)
+    pairs += augment_fold(specs, train_idx, cfg.aug_copies, seed)
+    if cfg.synthetic:
+        pairs += synthetic_pairs(domain, cfg.synthetic, seed, [specs[i].tree for i in train_idx])
     return pairs
-
-
-def borrowed_pairs(domain: str, writers: set[str], aug_copies: int, seed: int = 0) -> list[tuple[str, Tree]]:
-    """The other domains' real descriptions by `writers` (those of the training fold), each with
-    `aug_copies` augmented copies. Their trees use other questions and actions, but the way a
-    writer composes a policy ("check X; if so ... otherwise ...", numbered steps, pseudo-code)
-    is the same in every domain: twice the real text to learn it from. Writers outside the
-    training fold are left out, so leave-writers-out still meets its writers for the first time."""
-    out: list[tuple[str, Tree]] = []
-    for other in DOMAINS:
-        if other == domain:
-            continue
-        specs = load_corpus(other)
-        idx = [i for i, s in enumerate(specs) if s.writer in writers]
-        out += [(specs[i].description, specs[i].tree) for i in idx]
-        out += augment_fold(specs, idx, aug_copies, seed)
-    return out
 
 
 def member_pairs(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], cfg: ModelConfig,

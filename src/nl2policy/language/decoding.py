@@ -22,7 +22,7 @@ from nl2policy.language.stated_rules import broken_rules, first_question, stated
 from nl2policy.trees import Tree, from_tokens
 
 if TYPE_CHECKING:
-    from nl2policy.language.train import TrainedTranslator
+    from nl2policy.language.translator import TrainedTranslator
 
 MAX_STEPS = 15
 
@@ -30,10 +30,8 @@ MAX_STEPS = 15
 def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> list[tuple[Tree, dict[int, float]]]:
     """Beam search under the grammar mask over the members' averaged step probabilities
     (`model.beam` hypotheses per description; 1 is greedy). A tree's score is the sum of its
-    nodes' log-probabilities, so a subtree the text does not support costs its every node;
-    an action placed where a question could still go also costs `leaf_cost` nats, which
-    offsets that sum's pull towards small trees (the reported probabilities stay the
-    model's own). With a `mention_cost`, the final choice among the beam's hypotheses also
+    nodes' log-probabilities, so a subtree the text does not support costs its every node
+    (the reported probabilities stay the model's own). With a `mention_cost`, the final choice among the beam's hypotheses also
     pays that many nats for each action the text names (language/mentions.py) that the tree
     never takes, with a `question_cost`, that many for each question the text asks that the
     tree never does, and with a `rule_cost`, that many for each rule the text states that the tree
@@ -43,10 +41,8 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
     vocab = get_domain(model.domain).vocab
     names = model.tree_tokens
     index = {t: i for i, t in enumerate(names)}
-    is_action = torch.tensor([t in vocab.actions for t in names])
-    leaf_cost, mention_cost, question_cost, rule_cost, root_cost, findings_cost = (
-        model.decoding(c) for c in ("leaf_cost", "mention_cost", "question_cost", "rule_cost", "root_cost",
-                                    "findings_cost"))
+    mention_cost, question_cost, rule_cost, root_cost, findings_cost = (
+        model.decoding(c) for c in ("mention_cost", "question_cost", "rule_cost", "root_cost", "findings_cost"))
     B, K = len(texts), max(1, model.beam or model.cfg.beam)
     found = model.findings.read(texts) if findings_cost and model.findings is not None else None
     if found is not None:
@@ -91,9 +87,6 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
             score = score + findings_cost * (absent.repeat_interleave(K, 0) * ~used * fresh[:, None]).sum(-1).view(B, K)
             charged = charged | done
         logp = torch.where(mask, p.clamp(min=1e-12).log(), torch.tensor(-math.inf))
-        if leaf_cost:
-            early = (mask & ~is_action).any(-1, keepdim=True)  # a question was allowed here
-            logp = logp - leaf_cost * (early & is_action)
         if root_cost and step == 0:  # the root: where the text says which question comes first
             for b, text in enumerate(texts):
                 first = first_question(model.domain, text)
@@ -162,9 +155,6 @@ class DecoderState:
         self.states[:, :, 0] = h0
         self.tokens = torch.full((B, MAX_STEPS + 1), self.nets[0].start_id, dtype=torch.long)
         self.ctx = h0.new_zeros(E, B, self.nets[0].out.in_features - h)
-        self.cov = None  # coverage configs: (E, B, N) attention each word has received
-        if model.cfg.coverage:
-            self.cov = torch.stack([net.initial_coverage(m) for net, m in zip(self.nets, self.memories)])
         self.t = 0
         self.stacked = None
         if stack:
@@ -178,23 +168,19 @@ class DecoderState:
         h_prev, prev_tok = self.states[:, :, self.t], self.tokens[:, self.t]
         h_parent, parent_tok = self.states[:, rows, src], self.tokens[rows, src]
         if self.stacked is not None:
-            h, ctx, logits, cov = self.stacked.step(self.words, self.memories[0]["mask"], h_prev, self.ctx, prev_tok,
-                                                    h_parent, parent_tok, branch, self.cov)
+            h, ctx, logits = self.stacked.step(self.words, self.memories[0]["mask"], h_prev, self.ctx, prev_tok,
+                                               h_parent, parent_tok, branch)
         else:
-            out = [net.step(m, h_prev[e], self.ctx[e], prev_tok, h_parent[e], parent_tok, branch,
-                            None if self.cov is None else self.cov[e])
+            out = [net.step(m, h_prev[e], self.ctx[e], prev_tok, h_parent[e], parent_tok, branch)
                    for e, (net, m) in enumerate(zip(self.nets, self.memories))]
-            h, ctx, logits = (torch.stack(x) for x in list(zip(*out))[:3])
-            cov = None if self.cov is None else torch.stack([o[3] for o in out])
+            h, ctx, logits = (torch.stack(x) for x in zip(*out))
         self.states[:, :, self.t + 1] = h
-        self.ctx, self.cov = ctx, cov
+        self.ctx = ctx
         return logits
 
     def reorder(self, source: torch.Tensor) -> None:
         """Hypothesis i continues hypothesis source[i] (of the same description)."""
         self.states, self.tokens, self.ctx = self.states[:, source], self.tokens[source], self.ctx[:, source]
-        if self.cov is not None:
-            self.cov = self.cov[:, source]
 
     def push(self, chosen: torch.Tensor) -> None:
         self.t += 1

@@ -2,7 +2,7 @@
 "speed up", "move to the left lane"; and the questions it asks: "if it is in the city",
 "whether it has a passenger", "if the wait there is long".
 
-Two uses. Counterfactual augmentation (counterfactual.py) rewrites the mentions it finds. The
+The
 decoder's mention check (decoding.py) prefers, among its final hypotheses, a tree that does every
 action the text names: a text that says "drive to the city" and a tree that never does are at odds.
 The patterns are built for precision, not recall: on the corpus, an action they find is missing

@@ -7,10 +7,8 @@ rather than the 100-odd trees of the corpus, which is what unseen writers need.
 Long descriptions add what carries no policy: why-clauses after actions, asides about the
 questions and actions left out, a restated summary, a no-branch told before the yes-branch;
 the generator adds those too so the translator learns to read past them.
-Trees come from the random generator (never from a test fold), from the training fold's trees
-with fresh wordings, and optionally from one-edit mutants of the training fold's trees
-(`mutate`): trees near the corpus's habits that the corpus lacks, the kind a new description
-most often asks for.
+Trees come from the random generator (never from a test fold) and from the training fold's
+trees with fresh wordings.
 """
 
 from __future__ import annotations
@@ -45,57 +43,6 @@ Path = tuple[bool, ...]
 """Where a subtree sits: the answers (True = yes) that lead to it from the root."""
 
 
-def _subtrees(tree: Tree, path: Path = (), above: tuple[str, ...] = ()) -> Iterator[tuple[Path, Tree, tuple[str, ...]]]:
-    """(path, subtree, questions above it) for every node and leaf, in pre-order."""
-    yield path, tree, above
-    if isinstance(tree, Node):
-        yield from _subtrees(tree.yes, path + (True,), above + (tree.question,))
-        yield from _subtrees(tree.no, path + (False,), above + (tree.question,))
-
-
-def _replace(tree: Tree, path: Path, new: Tree) -> Tree:
-    if not path:
-        return new
-    if path[0]:
-        return Node(tree.question, _replace(tree.yes, path[1:], new), tree.no)
-    return Node(tree.question, tree.yes, _replace(tree.no, path[1:], new))
-
-
-def mutate(tree: Tree, vocab: Vocabulary, rng: random.Random) -> Tree:
-    """A valid tree one edit away from `tree`: an action grown into a new question (with random
-    subtrees), a question cut back to one action, or one action or question relabelled.
-
-    The translator's commonest error on a tree it never saw is a near miss of a corpus tree:
-    the subtree the text describes collapsed into the action the corpus usually has there.
-    Random trees (random_tree) are far from the corpus; these sit right next to it."""
-    for _ in range(100):
-        path, sub, above = rng.choice(list(_subtrees(tree)))
-        kind = rng.choice(["grow", "cut", "relabel"])
-        if isinstance(sub, Leaf) and kind == "grow" and len(path) < MAX_DEPTH:
-            free = [q for q in vocab.question_ids if q not in above]
-            q = rng.choice(free)
-            new: Tree = Node(q, random_tree(vocab, rng, len(path) + 1, above + (q,)),
-                             random_tree(vocab, rng, len(path) + 1, above + (q,)))
-        elif isinstance(sub, Node) and kind == "cut" and path:
-            new = Leaf(rng.choice(vocab.action_ids))
-        elif isinstance(sub, Leaf) and kind == "relabel":
-            new = Leaf(rng.choice([a for a in vocab.action_ids if a != sub.action]))
-        elif isinstance(sub, Node) and kind == "relabel":
-            below = questions_used(sub.yes) | questions_used(sub.no)
-            free = [q for q in vocab.question_ids if q not in above and q not in below and q != sub.question]
-            if not free:
-                continue
-            new = Node(rng.choice(free), sub.yes, sub.no)
-        else:
-            continue
-        out = _replace(tree, path, new)
-        try:  # the tree rules (e.g. a cut or relabel may leave a question with identical branches)
-            validate(out, vocab)
-        except TreeError:
-            continue
-        if out != tree:
-            return out
-    raise ValueError("no valid one-edit mutant found")
 
 
 class _Words:
@@ -244,15 +191,10 @@ def describe(tree: Tree, domain: str, rng: random.Random) -> str:
 
 
 def synthetic_pairs(domain: str, n_random: int, seed: int = 0, extra_trees: Sequence[Tree] = (),
-                    per_tree: int = 1, n_mutants: int = 0) -> list[tuple[str, Tree]]:
+                    per_tree: int = 1) -> list[tuple[str, Tree]]:
     """`n_random` random trees plus `per_tree` fresh descriptions of each tree in `extra_trees`
-    (pass training-fold trees only), then `n_mutants` one-edit mutants of trees drawn from
-    `extra_trees` (drawn after the rest, so adding mutants leaves the other pairs as they were)."""
+    (pass training-fold trees only)."""
     vocab = get_domain(domain).vocab
     rng = random.Random(seed)
     trees = [random_tree(vocab, rng) for _ in range(n_random)] + [t for t in extra_trees for _ in range(per_tree)]
-    pairs = [(describe(t, domain, rng), t) for t in trees]
-    if n_mutants and extra_trees:
-        mutants = [mutate(rng.choice(list(extra_trees)), vocab, rng) for _ in range(n_mutants)]
-        pairs += [(describe(t, domain, rng), t) for t in mutants]
-    return pairs
+    return [(describe(t, domain, rng), t) for t in trees]

@@ -16,7 +16,7 @@ import math
 import sys
 import threading
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Callable, Optional
 
@@ -25,13 +25,15 @@ import torch
 from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.dataset import member_pairs
+from nl2policy.language.findings import FindingsModel
 from nl2policy.language.members import default_workers, is_current
 from nl2policy.language.mentions import unasked_questions, unmet_mentions
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS, ModelConfig
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.stated_rules import broken_rules, first_question
 from nl2policy.language.text import tokenize
-from nl2policy.language.train import TrainedTranslator, fit
+from nl2policy.language.train import fit
+from nl2policy.language.translator import TrainedTranslator
 from nl2policy.trees import Tree, tree_to_json
 
 LOW_CONFIDENCE = 0.5
@@ -82,6 +84,10 @@ def find_model(domain: str, name: str = DEFAULT_MODEL) -> Optional[Path]:
     return None
 
 
+TRAINING_ROUNDS = (1, 2)
+"""The corpus rounds a shipped model trains on: all of them (round 2's trees are new to round 1)."""
+
+
 def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
                   progress: Optional[Callable[[int, int], None]] = None, out: Optional[Path] = None,
                   workers: Optional[int] = None) -> Path:
@@ -100,7 +106,7 @@ def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
     if state is not None and not is_current(state):
         print(f"ignoring {ckpt}: a checkpoint of an older version; training afresh", file=sys.stderr)
         state = None
-    specs = load_corpus(domain)
+    specs = load_corpus(domain, rounds=TRAINING_ROUNDS)
     pairs = member_pairs(domain, specs, range(len(specs)), cfg, seed)
     vocab_texts = [s.description for s in specs]  # the word vocabulary: real descriptions only
 
@@ -113,7 +119,8 @@ def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
                 workers=workers or default_workers(cfg))
     tmp = path.with_suffix(".tmp")
     torch.save({"domain": domain, "name": name, "cfg": cfg.to_dict(), "words": model.words.itos[2:],
-                "nets": [net.state_dict() for net in model.nets], "lexicon": topic_lexicon(domain)}, tmp)
+                "nets": [net.state_dict() for net in model.nets], "lexicon": topic_lexicon(domain),
+                "findings": model.findings.state() if model.findings is not None else None}, tmp)
     tmp.replace(path)
     ckpt.unlink(missing_ok=True)
     return path
@@ -122,7 +129,8 @@ def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
 def topic_lexicon(domain: str) -> dict[str, list[str]]:
     """Words typical of each domain's descriptions (in >= 5 of its specs, >= 4x as often as
     in the other domain's): the on-topic detector's evidence."""
-    df = {d: Counter(w for s in load_corpus(d) for w in set(tokenize(s.description))) for d in DOMAINS}
+    df = {d: Counter(w for s in load_corpus(d, rounds=TRAINING_ROUNDS) for w in set(tokenize(s.description)))
+          for d in DOMAINS}
     out = {}
     for d in DOMAINS:
         others = Counter()
@@ -141,10 +149,13 @@ class LoadedModel:
 
 def load_model(path: Path) -> LoadedModel:
     data = torch.load(path, weights_only=False)
-    cfg = ModelConfig(**data["cfg"])
+    known = {f.name for f in fields(ModelConfig)}
+    cfg = ModelConfig(**{k: v for k, v in data["cfg"].items() if k in known})  # (settings of deleted variants: off)
     states = data["nets"] if "nets" in data else [data["net"]]  # "net": files from before ensembles
     translator = TrainedTranslator.from_states(data["domain"], data["name"], cfg, data["words"], states,
                                                MiniLMCache(max_items=256))
+    if data.get("findings") is not None:
+        translator.findings = FindingsModel.from_state(data["findings"], translator.cache)
     return LoadedModel(translator, {d: set(ws) for d, ws in data["lexicon"].items()})
 
 

@@ -12,14 +12,10 @@ from typing import Optional
 
 import torch
 import torch.nn as nn
-import torch.nn.functional as F
 from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
 
 from nl2policy.language.models.config import ModelConfig
-from nl2policy.language.models.pathnet import PathDecoder
-from nl2policy.language.models.pretrained import DIM as MINILM_DIM, top_layers
-
-MAX_SENT_POS = 24
+from nl2policy.language.models.pretrained import DIM as MINILM_DIM
 
 
 @dataclass
@@ -32,7 +28,6 @@ class Batch:
     mini: Optional[torch.Tensor]  # (B, layers, N, 384) frozen MiniLM states, or None
     sent_index: torch.Tensor
     sent_lengths: torch.Tensor  # (B, S) words per sentence (0 = padding sentence)
-    sent_ids: torch.Tensor  # (B, N) sentence number of each word
     n_sents: torch.Tensor  # (B,)
 
 
@@ -56,7 +51,7 @@ def _masked_mean(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
 
 
 class Translator(nn.Module):
-    def __init__(self, cfg: ModelConfig, n_words: int, n_tree_tokens: int, n_questions: int = 0) -> None:
+    def __init__(self, cfg: ModelConfig, n_words: int, n_tree_tokens: int) -> None:
         super().__init__()
         self.cfg = cfg
         h, e = cfg.hidden, cfg.embed
@@ -68,16 +63,8 @@ class Translator(nn.Module):
             self.mini_norm = nn.LayerNorm(MINILM_DIM)  # BERT states have a few huge dimensions
             self.mini_proj = nn.Linear(MINILM_DIM, 2 * e)
             in_dim += 2 * e
-            if cfg.minilm_tune:  # trained copies of the top layers, reading the frozen layer below
-                if not 0 < cfg.minilm_tune <= cfg.minilm_layers:
-                    raise ValueError(f"minilm_tune must be between 1 and minilm_layers ({cfg.minilm_layers})")
-                self.mini_top = top_layers(cfg.minilm_tune, cfg.minilm_layers)
         self.drop = nn.Dropout(cfg.dropout)
-        if cfg.word_rnn:
-            self.word_gru = nn.GRU(in_dim, h, batch_first=True, bidirectional=True)
-        else:  # MiniLM states are already contextual: a width-3 convolution is enough, and 5x faster
-            self.word_ff = nn.Conv1d(in_dim, 2 * h, kernel_size=3, padding=1)
-            self.sent_pos = nn.Embedding(MAX_SENT_POS, 2 * h)  # which sentence a word is in: order for attention
+        self.word_gru = nn.GRU(in_dim, h, batch_first=True, bidirectional=True)
         mem = 2 * h
         if cfg.encoder == "han":
             self.word_att = nn.Linear(mem, 1)
@@ -86,17 +73,7 @@ class Translator(nn.Module):
             ctx_dim = 2 * mem
         else:
             ctx_dim = mem
-        if cfg.coverage:  # attention that knows what it has read (see attend)
-            if cfg.encoder != "flat":
-                raise ValueError("coverage is implemented for the flat encoder only")
-            self.cov_query = nn.Linear(h, mem, bias=False)
-            self.unread_query = nn.Linear(h, mem, bias=False)
-            self.unread_scale = nn.Parameter(torch.zeros(()))
-            ctx_dim = 2 * mem
         self.init = nn.Linear(mem, h)
-        if cfg.decoder == "path":  # the path-conditioned node classifier (pathnet.py) reads the word states only
-            self.path = PathDecoder(n_questions, n_tree_tokens, mem, h, cfg.dropout)
-            return
         self.tok_emb = nn.Embedding(n_tree_tokens + 1, e)  # last id: the root's "start"
         self.branch_emb = nn.Embedding(3, e)
         self.cell = nn.GRUCell(3 * e + h + ctx_dim, h)  # [previous token, parent token, branch, parent state, last context]
@@ -110,50 +87,26 @@ class Translator(nn.Module):
         x = self.word_emb(b.words)
         if self.cfg.minilm:
             weights = torch.softmax(self.mix_logits, 0)
-            mixed = torch.einsum("l,blnd->bnd", weights, self._minilm_states(b))
+            mixed = torch.einsum("l,blnd->bnd", weights, b.mini)
             x = torch.cat([x, self.mini_proj(self.mix_gamma * self.mini_norm(mixed))], -1)
         return self.drop(x)
 
-    def _minilm_states(self, b: Batch) -> torch.Tensor:
-        """The MiniLM layers to mix (B, layers+1, N, 384): the cached ones, with the tuned top
-        layers (if any) recomputed from the cached layer below them. Our tokens stand in for
-        MiniLM's word pieces (their states are piece averages), which changes little: most
-        words are one piece, and the tuned layers learn the rest."""
-        k = self.cfg.minilm_tune
-        if not k:
-            return b.mini
-        keep = b.mini.shape[1] - k
-        h = b.mini[:, keep - 1]
-        pad = (b.words == 0)[:, None, None, :]  # additive attention mask, BERT's convention (finite:
-        bias = torch.zeros(pad.shape, dtype=h.dtype).masked_fill(pad, -1e4)  # an empty text stays finite)
-        tuned = []
-        for layer in self.mini_top:
-            out = layer(h, attention_mask=bias)
-            h = out[0] if isinstance(out, tuple) else out
-            tuned.append(h)
-        return torch.cat([b.mini[:, :keep], torch.stack(tuned, 1)], 1)
-
-    def _words(self, x: torch.Tensor, lengths: torch.Tensor, sent_ids: Optional[torch.Tensor] = None) -> torch.Tensor:
-        if self.cfg.word_rnn:
-            return _bigru_packed(self.word_gru, x, lengths)
-        return torch.tanh(self.word_ff(x.transpose(1, 2)).transpose(1, 2) + self.sent_pos(sent_ids.clamp(max=MAX_SENT_POS - 1)))
+    def _words(self, x: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+        return _bigru_packed(self.word_gru, x, lengths)
 
     def encode(self, b: Batch) -> dict:
         x = self._inputs(b)
         mask = b.words != 0
         if self.cfg.encoder == "flat":
-            return self.flat_memory(self.drop(self._words(x, b.lengths, b.sent_ids)), mask)
+            return self.flat_memory(self.drop(self._words(x, b.lengths)), mask)
         B, S, W = b.sent_index.shape
         grid_index = b.sent_index.view(B, S * W, 1)
         word_mask = torch.arange(W)[None, None] < b.sent_lengths[..., None]  # (B, S, W)
-        if self.cfg.word_rnn:  # one BiGRU pass per sentence, then back to the flat word axis
-            xs = torch.gather(_pad1(x), 1, grid_index.expand(-1, -1, x.shape[-1])).view(B * S, W, -1)
-            grid = _bigru_packed(self.word_gru, xs, b.sent_lengths.view(-1)).view(B, S * W, -1)
-            flat = torch.zeros(B, x.shape[1] + 1, grid.shape[-1]).scatter(1, grid_index.expand(-1, -1, grid.shape[-1]), grid)
-            states = flat[:, :-1]
-        else:
-            states = self._words(x, b.lengths, b.sent_ids)
-            grid = torch.gather(_pad1(states), 1, grid_index.expand(-1, -1, states.shape[-1]))
+        # one BiGRU pass per sentence, then back to the flat word axis
+        xs = torch.gather(_pad1(x), 1, grid_index.expand(-1, -1, x.shape[-1])).view(B * S, W, -1)
+        grid = _bigru_packed(self.word_gru, xs, b.sent_lengths.view(-1)).view(B, S * W, -1)
+        flat = torch.zeros(B, x.shape[1] + 1, grid.shape[-1]).scatter(1, grid_index.expand(-1, -1, grid.shape[-1]), grid)
+        states = flat[:, :-1]
         states = self.drop(states)
         grid = self.drop(grid).view(B, S, W, -1)
         att = self.word_att(grid).squeeze(-1).masked_fill(~word_mask, -1e9)
@@ -168,28 +121,14 @@ class Translator(nn.Module):
         """The flat encoder's memory: its word states and mask, and the decoder's start state."""
         return {"words": states, "mask": mask, "h0": torch.tanh(self.init(_masked_mean(states, mask)))}
 
-    def attend(self, memory: dict, h: torch.Tensor, cov: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, Optional[torch.Tensor]]:
-        """The attention context for decoder state h, and the word attention it used (flat
-        encoder; None for the hierarchical one).
-
-        With coverage (`cov`: (B, N) attention each word has received so far), a read word
-        scores by a second query as well, and a second head reads what is still unread (its
-        score pays softplus(unread_scale) per unit of coverage). The errors this is for are
-        subtrees left out: under-translation, which coverage was made for in machine
-        translation (Tu et al., 2016, "Modeling Coverage for Neural Machine Translation")."""
+    def attend(self, memory: dict, h: torch.Tensor) -> torch.Tensor:
+        """The attention context for decoder state h."""
         q = self.word_query(h)  # (B, mem)
         words = memory["words"]
         score = torch.einsum("bnd,bd->bn", words, q)
         if self.cfg.encoder == "flat":
-            if cov is not None:
-                score = score + cov * torch.einsum("bnd,bd->bn", words, self.cov_query(h))
             att = torch.softmax(score.masked_fill(~memory["mask"], -1e9), -1)
-            ctx = torch.einsum("bn,bnd->bd", att, words)
-            if cov is not None:
-                unread = torch.einsum("bnd,bd->bn", words, self.unread_query(h)) - F.softplus(self.unread_scale) * cov
-                unread = torch.softmax(unread.masked_fill(~memory["mask"], -1e9), -1)
-                ctx = torch.cat([ctx, torch.einsum("bn,bnd->bd", unread, words)], -1)
-            return ctx, att
+            return torch.einsum("bn,bnd->bd", att, words)
         # hierarchical: P(sentence) * P(word | sentence), normalised on the (sentence, word) grid
         B, S, W = memory["grid_index"].shape
         s_att = torch.softmax(torch.einsum("bsd,bd->bs", memory["sents"], q).masked_fill(~memory["sent_mask"], -1e9), -1)
@@ -197,40 +136,31 @@ class Translator(nn.Module):
         grid_att = torch.softmax(grid_score.masked_fill(~memory["word_mask"], -1e9), -1) * s_att[..., None]
         flat_att = torch.zeros(B, words.shape[1] + 1).scatter_add(1, memory["grid_index"].view(B, -1), grid_att.view(B, -1))
         return torch.cat([torch.einsum("bs,bsd->bd", s_att, memory["sents"]),
-                          torch.einsum("bn,bnd->bd", flat_att[:, :-1], words)], -1), None
+                          torch.einsum("bn,bnd->bd", flat_att[:, :-1], words)], -1)
 
     # ---- decoder -------------------------------------------------------------------------
     def step(self, memory: dict, h_prev: torch.Tensor, ctx_prev: torch.Tensor, prev_tok: torch.Tensor,
-             h_parent: torch.Tensor, parent_tok: torch.Tensor, branch: torch.Tensor,
-             cov: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
+             h_parent: torch.Tensor, parent_tok: torch.Tensor, branch: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """One decoding step. Seq mode: the state runs on from the previous token only. Tree
         mode: it also takes the parent node's token and state and which branch (yes/no) this
         slot is, so each node is decoded knowing where in the tree it sits.
-        Returns (state, attention context, unmasked logits, coverage after this step; None
-        without coverage)."""
+        Returns (state, attention context, unmasked logits)."""
         if self.cfg.decoder == "seq":
             h_parent = torch.zeros_like(h_parent)
             parent_tok = torch.full_like(parent_tok, self.start_id)
             branch = torch.zeros_like(branch)
         inp = torch.cat([self.tok_emb(prev_tok), self.tok_emb(parent_tok), self.branch_emb(branch), h_parent, ctx_prev], -1)
         h = self.cell(self.drop(inp), h_prev)
-        ctx, att = self.attend(memory, h, cov)
-        if cov is not None:
-            cov = cov + att
-        return h, ctx, self.logits(self.drop(torch.tanh(self.out(torch.cat([h, ctx], -1))))), cov
+        ctx = self.attend(memory, h)
+        return h, ctx, self.logits(self.drop(torch.tanh(self.out(torch.cat([h, ctx], -1)))))
 
-    def run_step(self, memory: dict, hs: list, ctxs: list, toks: list, parent: torch.Tensor, branch: torch.Tensor,
-                 cov: Optional[torch.Tensor] = None):
+    def run_step(self, memory: dict, hs: list, ctxs: list, toks: list, parent: torch.Tensor, branch: torch.Tensor):
         """The next step given the states so far (hs[0] = h0, toks[0] = start); parent is the
         parent's step index (-1 for the root)."""
         rows = torch.arange(len(parent))
         H, T = torch.stack(hs, 1), torch.stack(toks, 1)
         src = parent + 1  # the root's parent is the start state
-        return self.step(memory, hs[-1], ctxs[-1], toks[-1], H[rows, src], T[rows, src], branch, cov)
-
-    def initial_coverage(self, memory: dict) -> Optional[torch.Tensor]:
-        """Zero coverage (B, N) for a coverage config, else None."""
-        return memory["mask"].new_zeros(memory["mask"].shape, dtype=torch.float) if self.cfg.coverage else None
+        return self.step(memory, hs[-1], ctxs[-1], toks[-1], H[rows, src], T[rows, src], branch)
 
     def loss(self, b: Batch, targets: torch.Tensor, parents: torch.Tensor, branches: torch.Tensor,
              masks: torch.Tensor, steps: torch.Tensor) -> torch.Tensor:
@@ -241,9 +171,8 @@ class Translator(nn.Module):
         hs, toks = [memory["h0"]], [torch.full((B,), self.start_id, dtype=torch.long)]
         ctxs = [torch.zeros(B, self.out.in_features - self.cfg.hidden)]
         total = torch.zeros(())
-        cov = self.initial_coverage(memory)
         for t in range(targets.shape[1]):
-            h, ctx, logits, cov = self.run_step(memory, hs, ctxs, toks, parents[:, t], branches[:, t], cov)
+            h, ctx, logits = self.run_step(memory, hs, ctxs, toks, parents[:, t], branches[:, t])
             hs.append(h)
             ctxs.append(ctx)
             toks.append(targets[:, t])
@@ -264,9 +193,6 @@ class StackedEncoder:
 
     def __init__(self, nets: list[Translator]) -> None:
         self.nets = nets
-        self.recurrent = nets[0].cfg.word_rnn
-        if not self.recurrent:
-            return
         grus = [n.word_gru for n in nets]
         # groups in the order (member 0 forward, member 0 backward, member 1 forward, ...)
         stack = lambda name: torch.stack([getattr(g, name + d).detach() for g in grus for d in ("", "_reverse")])
@@ -275,8 +201,6 @@ class StackedEncoder:
 
     def encode(self, b: Batch) -> list[dict]:
         """Every member's `Translator.encode(b)` (eval mode)."""
-        if not self.recurrent:
-            return [net.encode(b) for net in self.nets]
         x = torch.stack([net._inputs(b) for net in self.nets])  # (E, B, N, in)
         mask = b.words != 0
         states = self.bigru(x, b.lengths)
@@ -322,18 +246,13 @@ class StackedDecoder:
         self.w_query = stack(lambda n: n.word_query.weight).transpose(1, 2)
         self.w_out, self.b_out = stack(lambda n: n.out.weight).transpose(1, 2), stack(lambda n: n.out.bias)[:, None]
         self.w_logits, self.b_logits = stack(lambda n: n.logits.weight).transpose(1, 2), stack(lambda n: n.logits.bias)[:, None]
-        if self.cfg.coverage:
-            self.w_cov = stack(lambda n: n.cov_query.weight).transpose(1, 2)
-            self.w_unread = stack(lambda n: n.unread_query.weight).transpose(1, 2)
-            self.unread_scale = F.softplus(stack(lambda n: n.unread_scale))[:, None, None]
         self.start_id = nets[0].start_id
 
     def step(self, words: torch.Tensor, mask: torch.Tensor, h_prev: torch.Tensor, ctx_prev: torch.Tensor,
              prev_tok: torch.Tensor, h_parent: torch.Tensor, parent_tok: torch.Tensor,
-             branch: torch.Tensor, cov: Optional[torch.Tensor] = None
-             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
-        """words (E, B, N, mem), mask (B, N), states (E, B, .), tokens (B,), coverage (E, B, N)
-        or None. Returns (h, ctx, logits, coverage), each (E, B, .)."""
+             branch: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """words (E, B, N, mem), mask (B, N), states (E, B, .), tokens (B,). Returns (h, ctx,
+        logits), each (E, B, .)."""
         if self.cfg.decoder == "seq":
             h_parent = torch.zeros_like(h_parent)
             parent_tok = torch.full_like(parent_tok, self.start_id)
@@ -344,14 +263,7 @@ class StackedDecoder:
         r, z = torch.sigmoid(gi[0] + gh[0]), torch.sigmoid(gi[1] + gh[1])
         h = (1 - z) * torch.tanh(gi[2] + r * gh[2]) + z * h_prev
         score = torch.einsum("ebnd,ebd->ebn", words, torch.bmm(h, self.w_query))
-        if cov is not None:
-            score = score + cov * torch.einsum("ebnd,ebd->ebn", words, torch.bmm(h, self.w_cov))
         att = torch.softmax(score.masked_fill(~mask, -1e9), -1)
         ctx = torch.einsum("ebn,ebnd->ebd", att, words)
-        if cov is not None:
-            unread = torch.einsum("ebnd,ebd->ebn", words, torch.bmm(h, self.w_unread)) - self.unread_scale * cov
-            unread = torch.softmax(unread.masked_fill(~mask, -1e9), -1)
-            ctx = torch.cat([ctx, torch.einsum("ebn,ebnd->ebd", unread, words)], -1)
-            cov = cov + att
         hidden = torch.tanh(torch.baddbmm(self.b_out, torch.cat([h, ctx], -1), self.w_out))
-        return h, ctx, torch.baddbmm(self.b_logits, hidden, self.w_logits), cov
+        return h, ctx, torch.baddbmm(self.b_logits, hidden, self.w_logits)

@@ -2,9 +2,7 @@
 word features, aligned to our tokens.
 
 The model itself is never fine-tuned, so each text's layer outputs are computed once and cached
-(keyed by the text): cross-validation folds and epochs reuse them. A config that tunes the top
-layers (`ModelConfig.minilm_tune`) trains copies of them (`top_layers`) inside the translator,
-reading the cached, still frozen layer below. Only the embedding layer
+(keyed by the text): cross-validation folds and epochs reuse them. Only the embedding layer
 and the first `LAYERS` transformer layers are run: the ELMo-style mix learns how much of each
 to use, and stopping early keeps one translation under the latency budget.
 """
@@ -163,17 +161,6 @@ def fast_tokenizer():
     tok.no_truncation()
     tok.no_padding()
     return tok
-
-
-def top_layers(k: int, layers: int = 6) -> torch.nn.ModuleList:
-    """Float32 copies of the last `k` of MiniLM's first `layers` transformer layers, to be
-    trained with a translator (`ModelConfig.minilm_tune`). They read the cached states of the
-    layer below them, which stay frozen, so tuning costs k layers' forward and backward passes
-    per batch, not six."""
-    import copy
-
-    _, model = _load(6, int8=False)
-    return torch.nn.ModuleList(copy.deepcopy(layer) for layer in model.encoder.layer[layers - k:layers])
 
 
 class MiniLMCache:

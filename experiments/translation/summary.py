@@ -14,9 +14,9 @@ from statistics import mean, pstdev
 from typing import Sequence
 
 from nl2policy.language.corpus import load_corpus
-from nl2policy.language.evaluate import DECODING_ALTERNATIVES, held_out_writers, plan_folds, read_runs, unseen_trees
+from experiments.translation.evaluate import DECODING_ALTERNATIVES, held_out_writers, plan_folds, read_runs, unseen_trees
 from nl2policy.language.models.config import DEFAULT_MODEL, DEFAULT_NETWORKS, MODELS
-from nl2policy.language.reproduction import (decoded_as, fold_machine, machine_kinds, machine_labels, reproduction_checks,
+from experiments.translation.reproduction import (decoded_as, fold_machine, machine_kinds, machine_labels, reproduction_checks,
                                               reproduction_lines)
 from nl2policy.language.translate import LOW_CONFIDENCE
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from nl2policy.language.evaluate import DECODING_ALTERNATIVES
+from experiments.translation.evaluate import DECODING_ALTERNATIVES
 from nl2policy.language.models.config import MODELS, ModelConfig
 
 

@@ -20,11 +20,11 @@ import torch
 
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.dataset import member_pairs
-from nl2policy.language.evaluate import PROTOCOL_ROUNDS, score
+from experiments.translation.evaluate import PROTOCOL_ROUNDS, score
 from nl2policy.language.findings import FindingsModel, train_findings
 from nl2policy.language.models.config import MODELS
 from nl2policy.language.models.pretrained import MiniLMCache
-from nl2policy.language.train import TrainedTranslator
+from nl2policy.language.translator import TrainedTranslator
 from nl2policy.trees.tree import iter_leaves, questions_used
 
 PATTERN_CHECKS = ("mention_cost", "question_cost", "rule_cost", "root_cost")

@@ -21,7 +21,9 @@ from nl2policy.language.corpus import Spec, kfold, load_corpus, new_writer_folds
 from nl2policy.language.dataset import member_pairs
 from nl2policy.language.models.config import MODELS, networks_config
 from nl2policy.language.models.pretrained import MiniLMCache
-from nl2policy.language.train import TrainedTranslator, fit
+from nl2policy.language.findings import train_findings
+from nl2policy.language.train import fit
+from nl2policy.language.translator import TrainedTranslator
 from nl2policy.language.translate import LOW_CONFIDENCE, tree_probability
 from nl2policy.trees import GRID_SLOTS, Tree, TreeError, to_grid, to_tokens
 from nl2policy.trees.parse import validate
@@ -38,7 +40,8 @@ DECODING_ALTERNATIVES = {"greedy_tree_acc": ("beam", 1, "greedy (beam of 1)"),
                          "no_root_cost_tree_acc": ("root_cost", 0.0, "no stated-first-question check"),
                          "first_3_members_tree_acc": ("ensemble", 3, "its first 3 members"),
                          "first_4_members_tree_acc": ("ensemble", 4, "its first 4 members"),
-                         "first_5_members_tree_acc": ("ensemble", 5, "its first 5 members")}
+                         "first_5_members_tree_acc": ("ensemble", 5, "its first 5 members"),
+                         "no_findings_tree_acc": ("findings_cost", 0.0, "no learned findings")}
 
 
 def slot_accuracy(pred: Tree, gold: Tree) -> float:
@@ -86,6 +89,8 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     else:
         model = fit(domain, name, cfg, pairs, seed, cache=cache,
                     vocab_texts=[specs[i].description for i in train_idx], workers=workers)
+    if cfg.findings_cost and model.findings is None:  # decoding kept networks: their findings train here
+        model.findings = train_findings(domain, pairs(0) if callable(pairs) else pairs, seed + cfg.seed_offset, cache)
     if keep is not None:
         keep.parent.mkdir(parents=True, exist_ok=True)
         torch.save({"domain": domain, "name": name, "words": model.words.itos[2:], "machine": machine(),
@@ -107,7 +112,7 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     result["errors"] = [[specs[i].id, " ".join(to_tokens(p))] for i, p, r in zip(test_idx, preds, right) if not r]
     # the same networks on the same fold, decoded with less of each decoding choice the config makes
     for key, (attr, off, _) in DECODING_ALTERNATIVES.items():
-        if getattr(model.cfg, attr) > off:
+        if getattr(model.cfg, attr, off) > off:  # (a setting of deleted variants: only in older records)
             setattr(model, attr, off)
             result[key] = score(domain, [t for t, _ in model.predict(texts)], golds)["tree_acc"]
             setattr(model, attr, None)  # back to the config's

@@ -1,0 +1,103 @@
+"""The translation experiment (Table 1): every translator under cross-validation, leave-writers-out,
+leave-trees-out and new writers with new trees; resumable, one line per fold in runs.jsonl.
+
+    .venv/bin/python -m experiments.translation --domain taxi --plan 'best:trees1' --out results/translation/trees
+
+A lab harness, outside the product: it imports the package, the package never imports it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from experiments.translation.evaluate import fold_count, run_experiment
+from experiments.translation.summary import summarize
+from nl2policy.console import console, domain_or_fail, err
+from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
+
+
+def parse_plan(plan: str, domains: list[str], default_model: str) -> list[tuple[str, str, str, int]]:
+    """'model:protocols;...' -> (domain, model, protocol, repeats) steps, in plan order. A model
+    prefixed with 'DOMAIN/' runs for that domain only (a probe of one domain must not be listed as
+    not run in the others); protocols are cvR (R repeats of 5-fold CV), treesR (R repeats of
+    5-fold leave-trees-out on both corpus rounds), writers and new (each round-2 writer held out
+    with every policy they describe)."""
+    alias = {"best": default_model, "single": "seq2tree-minilm-synth", "ablation": "seq2tree-minilm"}
+    steps = []
+    for part in plan.split(";"):
+        name, sep, protocols = part.partition(":")
+        only, _, name = name.rpartition("/")
+        name = alias.get(name, name)
+        if not sep or name not in MODELS:
+            raise ValueError(f"plan part {part!r}: expected MODEL:PROTOCOLS with a model of {sorted(MODELS)}")
+        if only and only not in domains:
+            raise ValueError(f"plan part {part!r}: {only!r} is not one of the --domain options {domains}")
+        for p in protocols.split(","):
+            if p in ("writers", "new"):
+                protocol, repeats = p, 1
+            elif p.startswith("cv") and (p[2:] or "1").isdigit():
+                protocol, repeats = "cv", int(p[2:] or 1)
+            elif p.startswith("trees") and (p[5:] or "1").isdigit():
+                protocol, repeats = "trees", int(p[5:] or 1)
+            else:
+                raise ValueError(f"plan part {part!r}: protocol {p!r} is not cvR, treesR, writers or new")
+            steps += [(d, name, protocol, repeats) for d in domains if not only or d == only]
+    return steps
+
+
+DEFAULT_PLAN = "best:cv1,writers;single:cv1,writers;ablation:cv1,writers;seq2seq:cv1;seq2tree:cv1;han2tree:cv1"
+
+
+def translation_experiment(
+    domain: list[str] = typer.Option(["taxi", "highway"], help="Domains"),
+    plan: str = typer.Option(DEFAULT_PLAN, help="model:protocols;... with cvR = R repeats of 5-fold CV, writers = leave-writers-out; "
+                                               "'best' = the default model (an ensemble of four), 'single' = one of its "
+                                               "networks, 'ablation' = one network without synthetic data; "
+                                               "DOMAIN/model runs for that domain only"),
+    out: Path = typer.Option(Path("results/translation"), help="Folder for runs.jsonl, translation.md/.json/.png"),
+    summarize_only: bool = typer.Option(False, help="Only rewrite the tables from the folds already in runs.jsonl"),
+    workers: int = typer.Option(1, min=1, help="Processes training an ensemble's members side by side (one thread "
+                                               "each): same results, less wall time on a machine with as many cores"),
+    keep_networks: Optional[Path] = typer.Option(None, help="Also save each fold's networks in this folder, to study "
+                                                            "decoding choices on them without retraining"),
+    networks_from: Optional[Path] = typer.Option(None, help="A --keep-networks folder: a fold whose networks are there "
+                                                           "(same fold, a model that trains the same networks) decodes "
+                                                           "them instead of training"),
+) -> None:
+    """Cross-validation and leave-writers-out accuracy of every translator (resumable)."""
+    import torch
+
+    torch.set_num_threads(1)
+    for d in domain:
+        domain_or_fail(d)
+    try:
+        steps = parse_plan(plan, domain, DEFAULT_MODEL)
+    except ValueError as exc:
+        err.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(2)
+    # run in plan order (most important first): the experiment resumes, so what finished is kept
+    command = "python -m experiments.translation " + " ".join(f"--domain {d}" for d in domain) + f" --plan '{plan}' --out {out}"
+    if summarize_only and not (out / "runs.jsonl").is_file():
+        err.print(f"[red]error:[/red] no folds to summarise: {out / 'runs.jsonl'} does not exist (run without --summarize-only first)")
+        raise typer.Exit(2)
+    if not summarize_only:
+        run_experiment(steps, out, progress=lambda msg: err.print(f"fold: {msg}", highlight=False), workers=workers,
+                       keep_networks=keep_networks, networks_from=networks_from)
+    md = summarize(out, command, "one CPU thread per training process (with --workers N, an ensemble's members train in N such "
+                                 "processes: the same networks, less wall time); model seed = CV repeat index (ensemble member m: + m); "
+                                 "augmentation/synthetic seed 0 (with member_draws, member m: seed m); "
+                                 "both shifted by a model's seed_offset where it has one; "
+                                 "epochs, data and beam per model in nl2policy/language/models/config.py",
+                   planned=[(d, name, protocol, fold_count(protocol, repeats)) for d, name, protocol, repeats in steps])
+    console.print(md.read_text())
+
+
+def main() -> None:
+    typer.run(translation_experiment)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,128 @@
+"""The trained translator: an ensemble of networks with its word vocabulary, which reads
+descriptions into network inputs and decodes them into valid trees (decoding.py).
+
+Kept apart from the training loop (train.py): loading a saved model and translating need only this.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional, Sequence
+
+import torch
+
+from nl2policy.domains import get_domain
+from nl2policy.language.decoding import beam_search
+from nl2policy.language.findings import FindingsModel
+from nl2policy.language.models.config import ModelConfig
+from nl2policy.language.models.network import Batch, Translator
+from nl2policy.language.models.pretrained import DIM as MINILM_DIM, MiniLMCache
+from nl2policy.language.text import WordVocab, split_sentences
+from nl2policy.trees import Tree
+
+MAX_SENT_WORDS = 60
+
+
+@dataclass
+class Encoded:
+    """One description ready for the network."""
+
+    ids: list[int]
+    sent_lengths: list[int]
+    mini: Optional[torch.Tensor]
+
+
+@dataclass
+class TrainedTranslator:
+    domain: str
+    name: str
+    cfg: ModelConfig
+    words: WordVocab
+    nets: list[Translator]  # an ensemble: decoding averages their step probabilities
+    cache: MiniLMCache = field(default_factory=MiniLMCache, repr=False)
+    history: list[float] = field(default_factory=list, repr=False)  # mean training loss per epoch
+    beam: Optional[int] = None  # hypotheses kept while decoding (1 = greedy); None: the config's
+    mention_cost: Optional[float] = None  # decoding cost of a named action the tree lacks (see ModelConfig); None: the config's
+    question_cost: Optional[float] = None  # decoding cost of an asked question the tree lacks (see ModelConfig); None: the config's
+    rule_cost: Optional[float] = None  # decoding cost of a stated rule the tree breaks (see ModelConfig); None: the config's
+    root_cost: Optional[float] = None  # decoding cost of a root other than the stated first question; None: the config's
+    findings_cost: Optional[float] = None  # weight of the learned findings in decoding (see ModelConfig); None: the config's
+    findings: Optional[FindingsModel] = field(default=None, repr=False)  # the learned findings (language/findings.py)
+    ensemble: Optional[int] = None  # decode with the first n networks only; None: all of them
+    stack_members: bool = True  # flat encoders: decode all members as one batch (False: one by one, same result)
+
+    def decoding(self, setting: str) -> float:
+        """A decoding setting (`mention_cost`, `beam`, ...): this translator's override, else its config's."""
+        own = getattr(self, setting)
+        return getattr(self.cfg, setting) if own is None else own
+
+    @property
+    def net(self) -> Translator:
+        """The first network (the only one unless the config asks for an ensemble)."""
+        return self.nets[0]
+
+    @classmethod
+    def from_states(cls, domain: str, name: str, cfg: ModelConfig, words: Sequence[str], states: Sequence[dict],
+                    cache: MiniLMCache) -> TrainedTranslator:
+        """A translator from saved networks: its word vocabulary (`words.itos[2:]`, as saved) and
+        each network's state dict, in eval mode (a saved model file, a fold's kept networks)."""
+        model = cls(domain, name, cfg, WordVocab(words), [], cache)
+        for state in states:
+            net = model.new_net()
+            net.load_state_dict(state)
+            model.nets.append(net.eval())
+        return model
+
+    def new_net(self) -> Translator:
+        return Translator(self.cfg, len(self.words), len(self.tree_tokens))
+
+    @property
+    def tree_tokens(self) -> list[str]:
+        """The labels the decoder scores: the domain's questions, then its actions."""
+        vocab = get_domain(self.domain).vocab
+        return list(vocab.question_ids) + list(vocab.action_ids)
+
+    def encode(self, text: str) -> Encoded:
+        sentences = split_sentences(text) or [[]]
+        sentences = [s[:MAX_SENT_WORDS] for s in sentences if s] or []
+        flat = [t for s in sentences for t in s]
+        mini = torch.from_numpy(self.cache.get(text, flat, self.cfg.minilm_layers)) if self.cfg.minilm and flat else None
+        if self.cfg.minilm and mini is None:
+            mini = torch.zeros(self.cfg.minilm_layers + 1, 0, MINILM_DIM, dtype=torch.float16)
+        return Encoded(self.words.encode(t.text for t in flat), [len(s) for s in sentences], mini)
+
+    @torch.inference_mode()
+    def predict(self, texts: Sequence[str], batch_size: int = 64) -> list[tuple[Tree, dict[int, float]]]:
+        """Grammar-constrained decoding (beam search, greedy when `beam` is 1). Returns (tree, {grid slot: probability})."""
+        for net in self.nets:
+            if net.training:  # eval() walks every submodule: a cost per call otherwise
+                net.eval()
+        out = []
+        for i in range(0, len(texts), batch_size):
+            chunk = list(texts[i:i + batch_size])
+            out += beam_search(self, collate([self.encode(t) for t in chunk]), chunk)
+        return out
+
+
+def collate(items: Sequence[Encoded]) -> Batch:
+    B = len(items)
+    N = max(1, max(len(e.ids) for e in items))
+    S = max(1, max(len(e.sent_lengths) for e in items))
+    W = max([1] + [l for e in items for l in e.sent_lengths])
+    words = torch.zeros(B, N, dtype=torch.long)
+    sent_index = torch.full((B, S, W), N, dtype=torch.long)
+    sent_lengths = torch.zeros(B, S, dtype=torch.long)
+    for b, e in enumerate(items):
+        words[b, : len(e.ids)] = torch.tensor(e.ids, dtype=torch.long)
+        pos = 0
+        for s, n in enumerate(e.sent_lengths):
+            sent_index[b, s, :n] = torch.arange(pos, pos + n)
+            sent_lengths[b, s] = n
+            pos += n
+    minis = None
+    if items[0].mini is not None:
+        minis = torch.zeros(B, items[0].mini.shape[0], N, items[0].mini.shape[2])
+        for b, e in enumerate(items):
+            minis[b, :, : e.mini.shape[1]] = e.mini.float()
+    return Batch(words, torch.tensor([max(1, len(e.ids)) for e in items]), minis, sent_index, sent_lengths,
+                 torch.tensor([max(1, len(e.sent_lengths)) for e in items]))
