@@ -1,12 +1,12 @@
 """Decisive check for issue 26: can learned findings (language/findings.py) replace the
 corpus-fitted pattern checks (mentions.py, stated_rules.py) in the default's decoding?
 
-On each fold whose networks `translation-experiment --keep-networks` saved, the same networks
+On each fold whose networks `python -m experiments.translation --keep-networks` saved, the same networks
 are decoded three ways: as configured (the pattern checks), with no check at all, and with the
 learned findings instead of the patterns (trained on the fold's training pairs only, member 0's
 draw, seed 0; weight 1 nat per nat, declared before any fold ran). Resumable: one line per fold.
 
-    .venv/bin/python -m experiments.findings_probe --nets /work/scratch/trees_nets --out results/translation/findings_probe
+    .venv/bin/python -m experiments.translation.findings_probe --nets NETS --out results/translation/findings
 """
 
 from __future__ import annotations
@@ -104,7 +104,7 @@ def main() -> None:
     table = "\n".join(lines)
     (args.out / "findings_probe.md").write_text(
         f"# Learned findings against the pattern checks, same networks (tree accuracy, %, pooled)\n\n"
-        f"Made by: `.venv/bin/python -m experiments.findings_probe --nets {args.nets} --out {args.out}`\n\n{table}\n")
+        f"Made by: `.venv/bin/python -m experiments.translation.findings_probe --nets {args.nets} --out {args.out}`\n\n{table}\n")
     print(table)
 
 

@@ -69,7 +69,7 @@ def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str,
              "Machines (folds retrain bit for bit only on the kind of CPU that first ran them; seconds per fold "
              "depend on it and on the worker processes): " + "; ".join(f"{label} = {m}" for m, label in labels.items()) + ".",
              *reproduction_lines(checks, kinds, labels), "",
-             *(["\\* decoded the networks another model trained on the same folds (translation-experiment "
+             *(["\\* decoded the networks another model trained on the same folds (python -m experiments.translation "
                 "--networks-from, evaluate.kept_networks): seconds of decoding only.", ""]
                if any(r["reused"] for r in rows) else []),
              "| domain | model | protocol | folds | tree acc | token acc | policy acc | all outputs valid | train pairs | s/fold | machine |",
