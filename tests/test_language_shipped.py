@@ -59,3 +59,14 @@ def test_user_model_takes_precedence_over_the_shipped_one(empty_home):
     user.parent.mkdir(parents=True)
     user.write_bytes(b"")
     assert tr.find_model("taxi") == user
+
+
+def test_the_shipped_version_is_one_small_recipe_file_and_a_bad_setting_is_named(tmp_path, monkeypatch):
+    from nl2policy.language.models import config
+
+    assert config.DEFAULT_MODEL == "v1" and config.MODELS["v1"] == config.load_recipe("v1")
+    assert len((config.RECIPES / "v1.toml").read_text().splitlines()) < 40
+    (tmp_path / "v9.toml").write_text('encoder = "flat"\ndecoder = "tree"\nminilm = true\nsynthetic = 0\nbeam_width = 3\n')
+    monkeypatch.setattr(config, "RECIPES", tmp_path)
+    with pytest.raises(ValueError, match="unknown settings beam_width"):
+        config.load_recipe("v9")
