@@ -4,7 +4,7 @@ corpus-fitted pattern checks (mentions.py, stated_rules.py) in the default's dec
 On each fold whose networks `python -m experiments.translation --keep-networks` saved, the same networks
 are decoded three ways: as configured (the pattern checks), with no check at all, and with the
 learned findings instead of the patterns (trained on the fold's training pairs only, member 0's
-draw, seed 0; weight 1 nat per nat, declared before any fold ran). Resumable: one line per fold.
+draw, seed 0; weight 1 nat per nat). Resumable: one line per fold.
 
     .venv/bin/python -m experiments.translation.findings_probe --nets NETS --out results/translation/findings
 """
