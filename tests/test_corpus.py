@@ -110,6 +110,24 @@ def test_leave_trees_out_protocol_plans_five_folds_a_repeat_on_both_rounds():
     assert parse_plan("single:trees3", ["taxi"], "single") == [("taxi", "seq2tree-minilm-synth", "trees", 3)]
 
 
+@pytest.mark.parametrize("protocol", ["cv", "writers"])
+def test_both_rounds_protocols_test_round_one_folds_and_add_round_two_to_every_training_fold(protocol):
+    from experiments.translation.__main__ import parse_plan
+    from experiments.translation.evaluate import PROTOCOL_ROUNDS, fold_count, plan_folds
+
+    alone = plan_folds(load_corpus("taxi"), protocol, 2)
+    specs = load_corpus("taxi", rounds=PROTOCOL_ROUNDS[protocol + "both"])
+    both = plan_folds(specs, protocol + "both", 2)
+    round2 = {i for i, s in enumerate(specs) if s.round == 2}
+    assert len(both) == len(alone) == fold_count(protocol + "both", 2) and round2
+    for (key, train, test), (own_key, own_train, own_test) in zip(both, alone):
+        assert key == protocol + "both" + own_key[len(protocol):]
+        assert test == own_test and set(train) == set(own_train) | round2  # round 1 comes first in both
+    repeats = 2 if protocol == "cv" else 1
+    written = f"single:{protocol}both" + ("2" if protocol == "cv" else "")
+    assert parse_plan(written, ["taxi"], "single") == [("taxi", "seq2tree-minilm-synth", protocol + "both", repeats)]
+
+
 def test_new_writer_folds_hold_out_each_round_two_writer_and_every_policy_they_describe():
     from nl2policy.language.corpus import new_writer_folds, policy_key
 

@@ -24,7 +24,8 @@ def parse_plan(plan: str, domains: list[str], default_model: str) -> list[tuple[
     prefixed with 'DOMAIN/' runs for that domain only (a probe of one domain must not be listed as
     not run in the others); protocols are cvR (R repeats of 5-fold CV), treesR (R repeats of
     5-fold leave-trees-out on both corpus rounds), writers and new (each round-2 writer held out
-    with every policy they describe)."""
+    with every policy they describe), and cvbothR and writersboth (round 1's folds with round 2
+    joining every training fold)."""
     alias = {"best": default_model, "single": "seq2tree-minilm-synth", "ablation": "seq2tree-minilm"}
     steps = []
     for part in plan.split(";"):
@@ -36,14 +37,16 @@ def parse_plan(plan: str, domains: list[str], default_model: str) -> list[tuple[
         if only and only not in domains:
             raise ValueError(f"plan part {part!r}: {only!r} is not one of the --domain options {domains}")
         for p in protocols.split(","):
-            if p in ("writers", "new"):
+            if p in ("writers", "new", "writersboth"):
                 protocol, repeats = p, 1
+            elif p.startswith("cvboth") and (p[6:] or "1").isdigit():
+                protocol, repeats = "cvboth", int(p[6:] or 1)
             elif p.startswith("cv") and (p[2:] or "1").isdigit():
                 protocol, repeats = "cv", int(p[2:] or 1)
             elif p.startswith("trees") and (p[5:] or "1").isdigit():
                 protocol, repeats = "trees", int(p[5:] or 1)
             else:
-                raise ValueError(f"plan part {part!r}: protocol {p!r} is not cvR, treesR, writers or new")
+                raise ValueError(f"plan part {part!r}: protocol {p!r} is not cvR, treesR, writers, new, cvbothR or writersboth")
             steps += [(d, name, protocol, repeats) for d in domains if not only or d == only]
     return steps
 

@@ -94,7 +94,8 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     if keep is not None:
         keep.parent.mkdir(parents=True, exist_ok=True)
         torch.save({"domain": domain, "name": name, "words": model.words.itos[2:], "machine": machine(),
-                    "nets": [net.state_dict() for net in model.nets], "train": list(train_idx), "test": list(test_idx)}, keep)
+                    "nets": [net.state_dict() for net in model.nets], "train": list(train_idx), "test": list(test_idx),
+                    "findings": model.findings.state() if model.findings is not None else None}, keep)
     texts = [specs[i].description for i in test_idx]
     decoded = model.predict(texts)
     preds = [t for t, _ in decoded]
@@ -106,6 +107,9 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     right = [p == g for p, g in zip(preds, golds)]
     result.update(confident=sum(sure), confident_right=sum(s and r for s, r in zip(sure, right)),
                   unsure_right=sum(r and not s for s, r in zip(sure, right)))
+    # each translation's confidence and whether it was right, for the reliability table (summary.py)
+    result["confidence"] = [[specs[i].id, round(tree_probability(probs), 4), r]
+                            for i, (_, probs), r in zip(test_idx, decoded, right)]
     unseen = unseen_trees(specs, train_idx, test_idx)
     result.update(unseen=sum(unseen), unseen_right=sum(u and r for u, r in zip(unseen, right)))
     # what went wrong, for error analysis without retraining: (spec id, the predicted tree's tokens)
@@ -134,15 +138,16 @@ def machine() -> str:
     return f"{model or platform.machine()}, {'avx512' if 'avx512f' in flags else 'no avx512'}"
 
 
-PROTOCOL_ROUNDS = {"cv": (1,), "writers": (1,), "trees": (1, 2), "new": (1, 2)}
+PROTOCOL_ROUNDS = {"cv": (1,), "writers": (1,), "trees": (1, 2), "new": (1, 2), "cvboth": (1, 2), "writersboth": (1, 2)}
 """The corpus rounds each protocol runs on: the paper's protocol and leave-writers-out on round
 1, as before; leave-trees-out and new writers with new trees on both rounds (round 2's trees
-are all new to round 1)."""
+are all new to round 1); cvboth and writersboth test on round 1's folds of cv and writers, with
+every round-2 spec joining each training fold (the shipped model trains on both rounds)."""
 
 
 def fold_count(protocol: str, repeats: int) -> int:
     """Folds a protocol runs: 5 per repeat (cv, trees), 4 writer folds (writers, new)."""
-    return 5 * repeats if protocol in ("cv", "trees") else 4
+    return 5 * repeats if protocol in ("cv", "trees", "cvboth") else 4
 
 
 def plan_folds(specs: Sequence[Spec], protocol: str, repeats: int) -> list[tuple[str, list[int], list[int]]]:
@@ -156,6 +161,12 @@ def plan_folds(specs: Sequence[Spec], protocol: str, repeats: int) -> list[tuple
                 for f, (tr, te) in enumerate(kfold(specs, 5, seed=r, by_tree=True))]
     if protocol == "new":
         return [(f"new-f{f}", tr, te) for f, (tr, te) in enumerate(new_writer_folds(specs))]
+    if protocol in ("cvboth", "writersboth"):  # round 1's own folds, round 2 added to every training fold
+        first = [i for i, s in enumerate(specs) if s.round == 1]
+        extra = [i for i, s in enumerate(specs) if s.round != 1]
+        own = plan_folds([specs[i] for i in first], protocol[:-len("both")], repeats)
+        return [(protocol + key[key.index("-"):], [first[i] for i in tr] + extra, [first[i] for i in te])
+                for key, tr, te in own]
     return [(f"writers-f{f}", tr, te) for f, (tr, te) in enumerate(kfold(specs, 4, seed=0, by_writer=True))]
 
 

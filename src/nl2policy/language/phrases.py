@@ -1,9 +1,10 @@
 """Hand-written wordings of each domain's questions and actions, for the synthetic generator.
 
 Each question has statements that are true on its yes branch (`pos`) and on its no branch
-(`neg`), a clipped form for arrow and bullet styles (`short`, `short_no`), and made-up
-pseudo-code names (`code`). Written for this project from the briefing's wording, not from
-the corpus descriptions, so the synthetic data adds phrasings rather than copying writers.
+(`neg`) and a clipped form for arrow and bullet styles (`short`, `short_no`). Written for this
+project from the briefing's wording, not from the corpus descriptions, so the synthetic data
+adds phrasings rather than copying writers. Pseudo-code names are not written at all: they are
+made from the question's own id (`code_names`), so none is a name a writer invented.
 """
 
 from __future__ import annotations
@@ -13,72 +14,68 @@ QUESTIONS: dict[str, dict[str, dict[str, list[str]]]] = {
         "at_airport": {
             "pos": ["the taxi is at the airport", "it is at the airport", "you are at the airport", "I am at the airport", "we're at the airport"],
             "neg": ["the taxi is not at the airport", "it isn't at the airport", "you are not at the airport", "I'm somewhere other than the airport"],
-            "short": ["at the airport", "at airport", "airport"], "short_no": ["not at the airport", "elsewhere"],
-            "code": ["atAirport", "at_airport", "location == AIRPORT", "pos is airport", "inAirport"]},
+            "short": ["at the airport", "at airport", "airport"], "short_no": ["not at the airport", "elsewhere"]},
         "at_village": {
             "pos": ["the taxi is at the village", "it is in the village", "you are in the village", "I am at the village", "we're in the village"],
             "neg": ["the taxi is not at the village", "it is not in the village", "you aren't in the village", "I'm away from the village"],
-            "short": ["in the village", "at village", "village"], "short_no": ["not in the village", "away from the village"],
-            "code": ["atVillage", "at_village", "location == VILLAGE", "pos is village", "inVillage"]},
+            "short": ["in the village", "at village", "village"], "short_no": ["not in the village", "away from the village"]},
         "at_city": {
             "pos": ["the taxi is in the city", "it is in the city", "you are in the city", "I'm in the city", "we are downtown in the city"],
             "neg": ["the taxi is not in the city", "it isn't in the city", "you are not in the city", "I am outside the city"],
-            "short": ["in the city", "at city", "city"], "short_no": ["not in the city", "outside the city"],
-            "code": ["inCity", "at_city", "location == CITY", "pos is city", "atCity"]},
+            "short": ["in the city", "at city", "city"], "short_no": ["not in the city", "outside the city"]},
         "has_passenger": {
             "pos": ["the taxi has a passenger", "there is a passenger on board", "someone is in the back seat", "you have a passenger", "I've got a rider", "a passenger is aboard"],
             "neg": ["the taxi is empty", "there is no passenger", "nobody is on board", "you don't have a passenger", "the back seat is empty", "no one is in the car"],
-            "short": ["passenger aboard", "got a passenger", "someone on board", "have a passenger"], "short_no": ["no passenger", "empty", "nobody aboard"],
-            "code": ["hasPassenger", "has_passenger", "passenger != None", "gotRider", "occupied"]},
+            "short": ["passenger aboard", "got a passenger", "someone on board", "have a passenger"], "short_no": ["no passenger", "empty", "nobody aboard"]},
         "heavy_traffic": {
             "pos": ["the traffic to the city is heavy", "the road to the city is jammed", "there is heavy traffic on the city road", "the city road is congested", "traffic is bad"],
             "neg": ["the traffic to the city is light", "the road to the city is clear", "there is no heavy traffic", "the city road is not jammed", "traffic is fine"],
-            "short": ["heavy traffic", "city road jammed", "traffic bad"], "short_no": ["traffic light", "road clear", "no jam"],
-            "code": ["heavyTraffic", "heavy_traffic", "traffic == HEAVY", "jammed", "cityRoadBusy"]},
+            "short": ["heavy traffic", "city road jammed", "traffic bad"], "short_no": ["traffic light", "road clear", "no jam"]},
         "long_wait": {
             "pos": ["the wait at the village is long", "there is a long wait for a passenger in the village", "the village wait is long", "passengers are slow to show up at the village"],
             "neg": ["the wait at the village is short", "the village wait is not long", "there is no long wait in the village", "passengers show up quickly at the village"],
-            "short": ["long wait", "village wait long", "slow village"], "short_no": ["short wait", "wait is short"],
-            "code": ["longWait", "long_wait", "wait > LIMIT", "villageSlow", "waitIsLong"]},
+            "short": ["long wait", "village wait long", "slow village"], "short_no": ["short wait", "wait is short"]},
     },
     "highway": {
         "car_ahead_close": {
             "pos": ["there is a car close in front", "a car is close ahead in my lane", "someone is right in front of you", "the car ahead is close", "the gap ahead is small"],
             "neg": ["nobody is close in front", "the road ahead is clear", "there is no car close ahead", "the lane in front is empty", "the gap ahead is big"],
-            "short": ["car close ahead", "car in front", "blocked ahead"], "short_no": ["clear ahead", "nothing in front", "road open"],
-            "code": ["carAhead", "car_ahead_close", "gapAhead < SAFE", "blockedFront", "frontCarClose"]},
+            "short": ["car close ahead", "car in front", "blocked ahead"], "short_no": ["clear ahead", "nothing in front", "road open"]},
         "car_behind_close": {
             "pos": ["there is a car close behind", "someone is right behind me", "a car is tailgating you", "the car behind is close"],
             "neg": ["nobody is close behind", "there is no car close behind", "the lane behind is clear", "no one is tailgating"],
-            "short": ["car close behind", "tailgater", "car behind"], "short_no": ["nothing behind", "clear behind"],
-            "code": ["carBehind", "car_behind_close", "gapBehind < SAFE", "tailgated"]},
+            "short": ["car close behind", "tailgater", "car behind"], "short_no": ["nothing behind", "clear behind"]},
         "left_lane_free": {
             "pos": ["the left lane is free", "the lane to my left is clear", "there is room on the left", "you can move left safely"],
             "neg": ["the left lane is not free", "the lane on the left is blocked", "there is no room on the left", "the left side is taken"],
-            "short": ["left free", "left lane clear", "room on the left"], "short_no": ["left blocked", "left taken"],
-            "code": ["leftFree", "left_lane_free", "canGoLeft", "leftClear"]},
+            "short": ["left free", "left lane clear", "room on the left"], "short_no": ["left blocked", "left taken"]},
         "right_lane_free": {
             "pos": ["the right lane is free", "the lane to my right is clear", "there is room on the right", "you can move right safely"],
             "neg": ["the right lane is not free", "the lane on the right is blocked", "there is no room on the right", "the right side is taken"],
-            "short": ["right free", "right lane clear", "room on the right"], "short_no": ["right blocked", "right taken"],
-            "code": ["rightFree", "right_lane_free", "canGoRight", "rightClear"]},
+            "short": ["right free", "right lane clear", "room on the right"], "short_no": ["right blocked", "right taken"]},
         "in_left_lane": {
             "pos": ["I am in the leftmost lane", "the car is in the left lane", "you are in the far left lane", "we're in the leftmost lane"],
             "neg": ["I am not in the leftmost lane", "the car is not in the left lane", "you aren't in the far left lane"],
-            "short": ["leftmost lane", "in left lane", "far left"], "short_no": ["not leftmost", "not in left lane"],
-            "code": ["inLeftLane", "in_left_lane", "lane == 0", "leftmost"]},
+            "short": ["leftmost lane", "in left lane", "far left"], "short_no": ["not leftmost", "not in left lane"]},
         "in_right_lane": {
             "pos": ["I am in the rightmost lane", "the car is in the right lane", "you are in the far right lane", "we're in the rightmost lane"],
             "neg": ["I am not in the rightmost lane", "the car is not in the right lane", "you aren't in the far right lane"],
-            "short": ["rightmost lane", "in right lane", "far right"], "short_no": ["not rightmost", "not in right lane"],
-            "code": ["inRightLane", "in_right_lane", "lane == 2", "rightmost"]},
+            "short": ["rightmost lane", "in right lane", "far right"], "short_no": ["not rightmost", "not in right lane"]},
         "going_fast": {
             "pos": ["I am driving fast", "the car is going fast", "you are already fast", "my speed is high"],
             "neg": ["I am not driving fast", "the car is going slowly", "you are slow", "my speed is low"],
-            "short": ["going fast", "fast", "speed high"], "short_no": ["slow", "not fast", "speed low"],
-            "code": ["goingFast", "going_fast", "speed > LIMIT", "isFast"]},
+            "short": ["going fast", "fast", "speed high"], "short_no": ["slow", "not fast", "speed low"]},
     },
 }
+
+def code_names(question: str) -> list[str]:
+    """Names a pseudo-code writer might give a question, made from its id alone:
+    at_airport -> at_airport, atAirport, AtAirport, AT_AIRPORT, isAtAirport."""
+    head, *rest = question.split("_")
+    camel = head + "".join(part.title() for part in rest)
+    pascal = camel[0].upper() + camel[1:]
+    return [question, camel, pascal, question.upper(), "is" + pascal]
+
 
 ACTIONS: dict[str, dict[str, list[str]]] = {
     "taxi": {

@@ -18,7 +18,7 @@ from typing import Callable, Iterator, Sequence
 
 from nl2policy.domains import get_domain
 from nl2policy.language.augment import TEXTING
-from nl2policy.language.phrases import ACTIONS, ASIDES, FILLER, QUESTIONS, REASONS, SUMMARIES, UNUSED_ACTIONS
+from nl2policy.language.phrases import ACTIONS, ASIDES, FILLER, QUESTIONS, REASONS, SUMMARIES, UNUSED_ACTIONS, code_names
 from nl2policy.trees import MAX_DEPTH, Leaf, Node, Tree, TreeError, Vocabulary, to_tokens
 from nl2policy.trees.parse import validate
 from nl2policy.trees.tree import questions_used
@@ -55,7 +55,7 @@ class _Words:
     def pos(self, q: str) -> str: return self.pick(self.q[q]["pos"])
     def neg(self, q: str) -> str: return self.pick(self.q[q]["neg"])
     def short(self, q: str, yes: bool = True) -> str: return self.pick(self.q[q]["short" if yes else "short_no"])
-    def code(self, q: str) -> str: return self.pick(self.q[q]["code"])
+    def code(self, q: str) -> str: return self.pick(code_names(q))
     def act(self, a: str) -> str: return self.pick(self.a[a])
 
     def act_why(self, a: str, p: float = 0.3) -> str:

@@ -94,6 +94,7 @@ def load_recipe(version: str) -> ModelConfig:
 DEFAULT_MODEL = "v1"
 """The shipped translator's version: its models are named DOMAIN-VERSION (taxi-v1)."""
 MODELS[DEFAULT_MODEL] = load_recipe(DEFAULT_MODEL)
+MODELS["v2"] = load_recipe("v2")
 DEFAULT_NETWORKS = "seq2tree-minilm-synth-x4-mentions"
 """The model whose networks the default decodes: the same training, decoded with the action check
 only (the default's question and rule checks change nothing but the final choice among the beam's trees).
