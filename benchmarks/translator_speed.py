@@ -1,5 +1,5 @@
-"""How long the default translator takes to train for one domain (budget: 5 minutes) and to
-translate one description (budget: 20 ms), on this machine.
+"""How long the default translator takes to train for one domain (budget: 60 minutes) and to
+translate one description warm (budget: a median under 1 s), on this machine.
 
 Trains into a temporary NL2POLICY_HOME so a user's saved model is not touched.
 Run: .venv/bin/python benchmarks/translator_speed.py [--domain taxi] [--threads 2] [--latency-threads N] [--out FILE]
@@ -10,7 +10,7 @@ members one after the other in one process with `--threads` torch threads (`--no
 skips that second run). Translation uses one torch thread by default (a server answers each
 request on one thread); beside it, in the same rounds, the same texts at torch's default of a
 thread per core, as the command line's `translate` runs. Each timing starts with the text new to
-every cache (MiniLM's features, what the text checks find in it). The load average (printed)
+the MiniLM cache (the networks and the learned findings read the same features). The load average (printed)
 says how busy the machine was.
 """
 
@@ -53,8 +53,6 @@ def main() -> None:
     from nl2policy.language.text import split_sentences
     from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
     from nl2policy.language.translate import SHIPPED_DIR, get_model, model_path, train_default, translate
-    from nl2policy.language.mentions import _named_questions, named_actions
-    from nl2policy.language.stated_rules import _stated_rules, first_question
 
     name = args.model or DEFAULT_MODEL
     # one-time loads (WordNet, phrase tables, MiniLM weights, the optimizer's lazy imports)
@@ -86,14 +84,10 @@ def main() -> None:
     get_model(args.domain, name)
     translate(args.domain, "warm-up: " + specs[0].description, name)  # loads MiniLM; not a measured text
     translator = get_model(args.domain, name).translator
-    # each text is new to every cache each time it is timed: MiniLM's features and what the
-    # text checks find in it (mentions.TEXTS_CACHED), so each timing pays what a new request pays
-    text_caches = [named_actions, _named_questions, _stated_rules, first_question]
+    # each text is new to the MiniLM cache each time it is timed, so each timing pays what a new request pays
 
     def forget() -> None:
         translator.cache.store.clear()
-        for cached in text_caches:
-            cached.cache_clear()
 
     settings = {"asked": latency_threads, "torch default": default_threads}
     latency: dict[str, list[float]] = {k: [] for k in settings}
@@ -114,14 +108,10 @@ def main() -> None:
     latencies = sorted(latency["asked"])
     # side by side (MiniLM cached, rounds interleaved): the ensemble's encoders and decoders as one
     # stacked batch vs member by member, the config's beam vs greedy decoding, and with vs without each of the
-    # config's checks (the translator's overrides of its config; None: the config's own). What the
-    # patterns find in a text is cached (mentions.TEXTS_CACHED), so after a text's first round these
-    # time the checks of the beam's trees; the reading of a new text is in the latency above, once
+    # learned findings (the translator's overrides of its config; None: the config's own)
     variants = {"stacked": {}, "member by member": {"stack_members": False}, "stacked, greedy": {"beam": 1},
-                "stacked, no mention check": {"mention_cost": 0.0}, "stacked, no question check": {"question_cost": 0.0},
-                "stacked, no rule check": {"rule_cost": 0.0}, "stacked, no root check": {"root_cost": 0.0}}
-    defaults = {"stack_members": True, "beam": None, "mention_cost": None, "question_cost": None, "rule_cost": None,
-                "root_cost": None}
+                "stacked, no findings": {"findings_cost": 0.0}}
+    defaults = {"stack_members": True, "beam": None, "findings_cost": None}
     network_ms: dict[str, list[float]] = {v: [] for v in variants}
     for spec in specs:
         translator.encode(spec.description)  # MiniLM features cached for every timing
@@ -147,13 +137,13 @@ def main() -> None:
              f"{os.cpu_count()} cores ({machine()}), "
              f"load average (1 min) at start {load_start:.1f}, at end {os.getloadavg()[0]:.1f}",
              ("training time: not measured (--latency-only: the shipped model translates)" if train_s is None else
-              f"training time: {train_s:.1f} s (budget 300 s) -> {'OK' if train_s < 300 else 'OVER'}; "
+              f"training time: {train_s:.1f} s (budget 3600 s) -> {'OK' if train_s < 3600 else 'OVER'}; "
               f"{workers} worker processes of 1 torch thread (weights bit-identical to the shipped model's: {same_as_shipped})"
               + ("" if one_by_one_s is None else f"; members one by one in one process, {args.threads} torch threads: "
                  f"{one_by_one_s:.1f} s -> workers {one_by_one_s / train_s:.2f}x faster")),
              f"translation latency over {len(specs)} corpus descriptions (mean {statistics.mean(words):.0f} words), "
              f"model loaded, each text new to the MiniLM cache: median {median:.1f} ms, p90 {p90:.1f} ms, "
-             f"max {latencies[-1]:.1f} ms (budget 20 ms) -> {'OK' if median < 20 else 'OVER'}; the same texts at torch's "
+             f"max {latencies[-1]:.1f} ms (budget 1000 ms) -> {'OK' if median < 1000 else 'OVER'}; the same texts at torch's "
              f"default of {default_threads} threads (the command line's), in the same rounds: median "
              f"{statistics.median(latency['torch default']):.1f} ms",
              f"of which MiniLM features (tokenize, run, align to words): median {statistics.median(features):.1f} ms",
@@ -161,15 +151,8 @@ def main() -> None:
              f"interleaved: stacked encoders and decoders median {net['stacked']:.2f} ms vs member by member "
              f"{net['member by member']:.2f} ms -> {net['member by member'] / net['stacked']:.2f}x; "
              f"greedy (stacked) {net['stacked, greedy']:.2f} ms: the beam costs {net['stacked'] / net['stacked, greedy']:.2f}x; "
-             f"without the mention check (mention cost {translator.cfg.mention_cost}) "
-             f"{net['stacked, no mention check']:.2f} ms: the check costs "
-             f"{net['stacked'] / net['stacked, no mention check']:.2f}x; without the question check (question cost "
-             f"{translator.cfg.question_cost}, {translator.cfg.question_forms} forms) {net['stacked, no question check']:.2f} ms: "
-             f"the check costs {net['stacked'] / net['stacked, no question check']:.2f}x; without the rule check (rule cost "
-             f"{translator.cfg.rule_cost}, {translator.cfg.rule_forms} forms) {net['stacked, no rule check']:.2f} ms: the check "
-             f"costs {net['stacked'] / net['stacked, no rule check']:.2f}x; without the root check (root cost "
-             f"{translator.cfg.root_cost}) {net['stacked, no root check']:.2f} ms: the check costs "
-             f"{net['stacked'] / net['stacked, no root check']:.2f}x"]
+             f"without the learned findings (weight {translator.cfg.findings_cost}) {net['stacked, no findings']:.2f} ms: "
+             f"the findings cost {net['stacked'] / net['stacked, no findings']:.2f}x"]
     print("\n".join(lines))
     if args.out:
         with open(args.out, "w") as fh:

@@ -98,88 +98,83 @@ def test_off_topic_and_other_domain_get_low_confidence_and_a_warning(home):
         assert all(0.0 <= p <= 1.0 for p in own.node_confidence.values())
 
 
-def test_a_tree_that_never_takes_a_named_action_is_flagged(home, monkeypatch):
-    """The warning names each action the text names and the tree never takes (mentions.py)."""
-    vocab = get_domain("taxi").vocab
-    habit = parse_tree({"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_village"}}, vocab)
-    loaded = tr.get_model("taxi", "smoke")
-    monkeypatch.setattr(loaded.translator, "predict", lambda texts: [(habit, {0: 0.9, 1: 0.9, 2: 0.9})])
-    said = tr.translate("taxi", "With a passenger drive to the airport, otherwise drive to the city.", "smoke")
-    assert said.tree == habit and [w for w in said.warnings if "never does" in w] == [
-        "the description says to drive to the city (go_city), but the tree never does: check where it should"]
-    plain = tr.translate("taxi", "With a passenger drive to the airport, otherwise drive to the village.", "smoke")
-    assert plain.warnings == []
+def _findings(domain, asks=(), takes=(), root=None, p=0.9):
+    """Findings that say the text asks `asks`, takes `takes` and puts `root` first (probability p)."""
+    from nl2policy.language.findings import Findings
+
+    vocab = get_domain(domain).vocab
+    labels = list(vocab.question_ids) + list(vocab.action_ids)
+    rest = (1 - p) / (len(labels) - 1)
+    return Findings({q: p if q in asks else 1 - p for q in vocab.question_ids},
+                    {a: p if a in takes else 1 - p for a in vocab.action_ids},
+                    {l: p if l == root else rest for l in labels})
 
 
-def test_a_tree_that_never_asks_a_question_the_text_asks_is_flagged(home, monkeypatch):
-    """The warning names each question the text asks and the tree never does (mentions.py)."""
-    vocab = get_domain("taxi").vocab
-    habit = parse_tree({"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_city"}}, vocab)
-    loaded = tr.get_model("taxi", "smoke")
-    monkeypatch.setattr(loaded.translator, "predict", lambda texts: [(habit, {0: 0.9, 1: 0.9, 2: 0.9})])
-    warning = 'the description asks "is the taxi in the city?" (at_city), but the tree never does: check where it should'
-    said = tr.translate("taxi", "With a passenger drive to the airport. If you are in the city, wait; "
-                                "otherwise drive to the city.", "smoke")
-    assert [w for w in said.warnings if "check where it should" in w] == [warning]
-    # the extended forms too (a list header), whatever forms the model's own check uses
-    listed = tr.translate("taxi", "- passenger: drive to the airport\n- in the city: wait\n- elsewhere: drive to the city",
-                          "smoke")
-    assert [w for w in listed.warnings if "check where it should" in w] == [warning]
+def _warnings(monkeypatch, domain, tree, found, text="Some words about the taxi and the city."):
+    """The warnings `translate` gives when the smoke model decodes `tree` and reads `found`."""
+    tree = parse_tree(tree, get_domain(domain).vocab)
+    loaded = tr.get_model(domain, "smoke")
+    seen = []
+
+    def predict(texts, found=None):
+        seen.append(found)
+        return [(tree, {i: 0.9 for i, x in enumerate(to_grid(tree)) if x is not None})]
+
+    monkeypatch.setattr(loaded.translator, "predict", predict)
+    monkeypatch.setattr(loaded.translator, "read_findings", lambda texts: [found])
+    said = tr.translate(domain, text, "smoke")
+    assert said.tree == tree and seen == [[found]]  # decoding got the very findings the warnings read
+    return said.warnings
 
 
-def _rule_warnings(monkeypatch, tree: dict, text: str) -> list[str]:
-    """The rule warnings `translate` gives `text` when the smoke model's decoding returns `tree`."""
-    tree = parse_tree(tree, get_domain("taxi").vocab)
-    loaded = tr.get_model("taxi", "smoke")
-    monkeypatch.setattr(loaded.translator, "predict", lambda texts: [(tree, {0: 0.9, 1: 0.9, 2: 0.9, 4: 0.9, 5: 0.9})])
-    return [w for w in tr.translate("taxi", text, "smoke").warnings if "that there" in w]
+_HABIT = {"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_village"}}
 
 
-_HABIT = {"if": "has_passenger", "yes": {"do": "go_airport"},
-          "no": {"if": "at_village", "yes": {"do": "wait"}, "no": {"do": "go_village"}}}
-_ASKS = {"if": "heavy_traffic", "yes": {"do": "go_village"},
-         "no": {"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_city"}}}
+def test_a_tree_that_agrees_with_the_findings_gets_no_warning(home, monkeypatch):
+    found = _findings("taxi", asks={"has_passenger"}, takes={"go_airport", "go_village"}, root="has_passenger")
+    assert _warnings(monkeypatch, "taxi", _HABIT, found) == []
 
 
-@pytest.mark.parametrize("tree, text, warning", [
-    # a plain rule that no branch of the tree follows
-    (_HABIT, "With a passenger, drive to the airport. In the village, wait. No passenger and not in the village: go "
-             "to the city.",
-     'the description says "No passenger and not in the village: go to the city", but the tree never does that there: '
-     'check that branch'),
-    # "..., no matter what": some branch under its condition does something else (extended forms,
-    # whatever forms the model's own check reads)
-    (_ASKS, "When the road is jammed, go to the village. When it's clear, drive to the city, no matter what.",
-     'the description says "When it\'s clear, drive to the city, no matter what", but the tree does not always do that '
-     'there: check that branch'),
-])
-def test_a_tree_that_breaks_a_rule_the_text_states_is_flagged(home, monkeypatch, tree, text, warning):
-    """The warning quotes each rule the text states that the tree breaks (stated_rules.py)."""
-    assert _rule_warnings(monkeypatch, tree, text) == [warning]
+def test_an_action_or_question_the_text_seems_to_use_and_the_tree_never_does_is_flagged(home, monkeypatch):
+    found = _findings("taxi", asks={"has_passenger", "at_city"}, takes={"go_airport", "go_village", "go_city"},
+                      root="has_passenger")
+    assert _warnings(monkeypatch, "taxi", _HABIT, found) == [
+        "the description seems (90%) to say to drive to the city (go_city), but the tree never does: check where it should",
+        'the description seems (90%) to ask "is the taxi in the city?" (at_city), but the tree never does: check where '
+        "it should"]
 
 
-def test_a_tree_that_asks_another_question_first_than_the_text_says_is_flagged(home, monkeypatch):
-    vocab = get_domain("taxi").vocab
-    tree = parse_tree({"if": "at_city", "yes": {"do": "wait"}, "no": {"do": "go_city"}}, vocab)
-    loaded = tr.get_model("taxi", "smoke")
-    monkeypatch.setattr(loaded.translator, "predict", lambda texts: [(tree, {0: 0.9, 1: 0.9, 2: 0.9})])
-    top = lambda text: [w for w in tr.translate("taxi", text, "smoke").warnings if "check its top" in w]
-    assert top("First check whether there is a passenger. In the city, wait; elsewhere drive to the city.") == [
-        'the description says to ask first "does the taxi have a passenger?" (has_passenger), but the tree asks '
-        'something else first: check its top']
-    assert top("First check whether you are in the city: if so wait, if not drive to the city.") == []
+def test_a_question_the_tree_asks_and_the_text_does_not_seem_to_is_flagged(home, monkeypatch):
+    found = _findings("taxi", takes={"go_airport", "go_village"}, root="go_airport")
+    warnings = _warnings(monkeypatch, "taxi", _HABIT, found)
+    assert warnings == ['the tree asks "does the taxi have a passenger?" (has_passenger), which the description does '
+                        "not seem (10%) to ask: check that branch"]  # a root that is an action is no question to ask first
+
+
+def test_another_first_question_than_the_text_seems_to_ask_first_is_flagged(home, monkeypatch):
+    found = _findings("taxi", asks={"has_passenger", "at_city"}, takes={"go_airport", "go_village"}, root="at_city")
+    tree = {"if": "has_passenger", "yes": {"do": "go_airport"},
+            "no": {"if": "at_city", "yes": {"do": "go_village"}, "no": {"do": "go_airport"}}}
+    assert _warnings(monkeypatch, "taxi", tree, found) == [
+        'the description seems (90%) to ask first "is the taxi in the city?" (at_city), but the tree asks something else '
+        "first: check its top"]
+
+
+def test_an_off_topic_text_gets_no_findings_warnings(home, monkeypatch):
+    found = _findings("taxi", asks={"at_city"}, takes={"go_city"}, root="at_city")
+    warnings = _warnings(monkeypatch, "taxi", _HABIT, found, text="Bake the bread at two hundred degrees for an hour.")
+    assert warnings and not any("seems" in w or "seem " in w for w in warnings)
 
 
 def test_highway_warnings_name_the_question_without_its_note(home, monkeypatch):
-    """Highway's questions are read too (mentions.py, stated_rules.first_question); a warning quotes
-    the dictionary's question without the note after it."""
-    tree = parse_tree({"if": "car_ahead_close", "yes": {"do": "slower"}, "no": {"do": "faster"}}, get_domain("highway").vocab)
-    loaded = tr.get_model("highway", "smoke")
-    monkeypatch.setattr(loaded.translator, "predict", lambda texts: [(tree, {0: 0.9, 1: 0.9, 2: 0.9})])
-    said = tr.translate("highway", "First check whether the lane to the right is free: if it is, move right. "
-                                   "If not, slow down when a car is close in front, else speed up.", "smoke")
-    assert [w for w in said.warnings if "(right_lane_free)" in w] == [
-        'the description asks "is the lane to my right free?" (right_lane_free), but the tree never does: check where it '
-        'should',
-        'the description says to ask first "is the lane to my right free?" (right_lane_free), but the tree asks '
-        'something else first: check its top']
+    """A warning quotes the dictionary's question without the note after it."""
+    found = _findings("highway", asks={"car_ahead_close", "right_lane_free"}, takes={"slower", "faster"},
+                      root="right_lane_free")
+    tree = {"if": "car_ahead_close", "yes": {"do": "slower"}, "no": {"do": "faster"}}
+    warnings = _warnings(monkeypatch, "highway", tree, found, text="If the lane to the right is free, move right. "
+                                                                    "Slow down when a car is close in front.")
+    assert [w for w in warnings if "(right_lane_free)" in w] == [
+        'the description seems (90%) to ask "is the lane to my right free?" (right_lane_free), but the tree never does: '
+        "check where it should",
+        'the description seems (90%) to ask first "is the lane to my right free?" (right_lane_free), but the tree asks '
+        "something else first: check its top"]

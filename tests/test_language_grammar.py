@@ -9,7 +9,7 @@ from nl2policy.domains import get_domain
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.grammar import allowed_tokens, next_slot
 from nl2policy.language.models.config import MODELS
-from nl2policy.language.models.network import Translator
+from nl2policy.language.models.network import build_network
 from nl2policy.language.text import WordVocab
 from nl2policy.language.translator import TrainedTranslator
 from nl2policy.trees import from_tokens, to_tokens
@@ -51,12 +51,15 @@ def test_every_gold_tree_is_allowed_by_the_grammar(domain):
 
 @pytest.mark.parametrize("name", ["seq2seq", "han2tree", "seq2tree-minilm"])
 def test_untrained_models_output_valid_trees_for_every_description(name):
+    """The paper's baselines (the lab's architectures, decoded by the product's beam search) too."""
+    import experiments.translation.baselines  # noqa: F401  (registers them)
+
     torch.manual_seed(0)
     domain = "highway"
     specs = load_corpus(domain)
     vocab = get_domain(domain).vocab
     words = WordVocab.build([s.description for s in specs])
-    net = Translator(MODELS[name], len(words), len(vocab.question_ids) + len(vocab.action_ids))
+    net = build_network(MODELS[name], len(words), len(vocab.question_ids) + len(vocab.action_ids))
     model = TrainedTranslator(domain, name, MODELS[name], words, [net])
     texts = [s.description for s in specs] if name != "seq2tree-minilm" else [s.description for s in specs[::10]]
     outputs = model.predict(texts)

@@ -64,9 +64,27 @@ def test_user_model_takes_precedence_over_the_shipped_one(empty_home):
 def test_the_shipped_version_is_one_small_recipe_file_and_a_bad_setting_is_named(tmp_path, monkeypatch):
     from nl2policy.language.models import config
 
-    assert config.DEFAULT_MODEL == "v1" and config.MODELS["v1"] == config.load_recipe("v1")
-    assert len((config.RECIPES / "v1.toml").read_text().splitlines()) < 40
+    assert config.DEFAULT_MODEL == "v2" and config.MODELS["v2"] == config.load_recipe("v2")
+    assert len((config.RECIPES / "v2.toml").read_text().splitlines()) < 40
+    assert config.MODELS["v2"].findings_cost > 0  # the learned findings, no pattern check
     (tmp_path / "v9.toml").write_text('encoder = "flat"\ndecoder = "tree"\nminilm = true\nsynthetic = 0\nbeam_width = 3\n')
     monkeypatch.setattr(config, "RECIPES", tmp_path)
     with pytest.raises(ValueError, match="unknown settings beam_width"):
         config.load_recipe("v9")
+
+
+def test_the_product_holds_only_the_shipped_architecture_and_never_imports_the_lab():
+    """The paper's baselines live in experiments/ (the lab); the product names them clearly."""
+    import subprocess
+    import sys
+
+    code = ("import sys, nl2policy.cli, nl2policy.language.translate\n"
+            "from nl2policy.language.models.config import DEFAULT_MODEL, MODELS, ModelConfig\n"
+            "from nl2policy.language.models.network import build_network\n"
+            "assert not any(m.startswith('experiments') for m in sys.modules), 'the product imported the lab'\n"
+            "assert set(MODELS) == {DEFAULT_MODEL, 'smoke'}, sorted(MODELS)\n"
+            "try:\n    build_network(ModelConfig('han', 'tree', False, 0), 10, 5)\n"
+            "except ValueError as exc:\n    print(exc)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "no network for encoder 'han' with decoder 'tree'" in out.stdout and "experiments/translation" in out.stdout

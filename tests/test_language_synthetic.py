@@ -5,7 +5,6 @@ import random
 import pytest
 
 from nl2policy.domains import get_domain
-from nl2policy.language.phrases import ACTIONS, QUESTIONS
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.synthetic import describe, random_tree, synthetic_pairs
 from nl2policy.trees import Leaf, Node, to_tokens
@@ -34,10 +33,22 @@ def _paths(tree, path=()):
 @pytest.mark.parametrize("domain", ["taxi", "highway"])
 def test_every_phrase_set_is_complete(domain):
     vocab = get_domain(domain).vocab
-    assert set(QUESTIONS[domain]) == set(vocab.question_ids)
-    assert set(ACTIONS[domain]) == set(vocab.action_ids)
-    for q in QUESTIONS[domain].values():
-        assert all(q[k] for k in ("pos", "neg", "short", "short_no", "code"))
+    phrases = get_domain(domain).phrases  # the domain's own (domains/phrases/DOMAIN.toml)
+    assert set(phrases["questions"]) == set(vocab.question_ids)
+    assert set(phrases["actions"]) == set(vocab.action_ids) == set(phrases["reasons"])
+    for q in phrases["questions"].values():
+        assert all(q[k] for k in ("pos", "neg", "short", "short_no"))
+
+
+def test_pseudo_code_names_are_made_from_the_question_id_alone():
+    """No name a writer invented: each is the id, re-cased ("hasPassenger", "HAS_PASSENGER")."""
+    from nl2policy.language.phrases import code_names
+
+    assert code_names("has_passenger") == ["has_passenger", "hasPassenger", "HasPassenger", "HAS_PASSENGER",
+                                           "isHasPassenger"]
+    for domain in ("taxi", "highway"):
+        for q in get_domain(domain).vocab.question_ids:
+            assert all(name.lower().replace("_", "").endswith(q.replace("_", "")) for name in code_names(q))
 
 
 def test_pairs_are_reproducible_and_describe_training_trees_per_tree_times():
@@ -58,7 +69,7 @@ def test_descriptions_mention_every_action_of_the_tree():
         tree = random_tree(vocab, rng)
         text = describe(tree, "taxi", rng).lower()
         for action in {t for t in to_tokens(tree) if t in vocab.action_ids}:
-            assert any(_loose(p) in text for p in ACTIONS["taxi"][action]), (action, text)
+            assert any(_loose(p) in text for p in get_domain("taxi").phrases["actions"][action]), (action, text)
 
 
 def _loose(s: str) -> str:

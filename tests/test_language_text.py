@@ -20,8 +20,8 @@ def test_numbered_steps_and_bullets_are_sentences_without_their_markers():
 
 
 def test_pseudo_code_names_are_split_and_lines_are_sentences():
-    text = "if gotRider:\n    drive to airport\nelse:\n    wait_for_rider"
-    assert words(split_sentences(text)) == [["if", "got", "rider"], ["drive", "to", "airport"], ["else"], ["wait", "for", "rider"]]
+    text = "if isCarryingSomeone:\n    drive to airport\nelse:\n    wait_for_rider"
+    assert words(split_sentences(text)) == [["if", "is", "carrying", "someone"], ["drive", "to", "airport"], ["else"], ["wait", "for", "rider"]]
 
 
 def test_arrows_do_not_split_a_rule_and_spans_point_into_the_raw_text():

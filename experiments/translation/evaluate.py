@@ -32,15 +32,7 @@ from nl2policy.trees.parse import validate
 # the config sets more: record key -> (TrainedTranslator and ModelConfig attribute, that value,
 # label in the summary)
 DECODING_ALTERNATIVES = {"greedy_tree_acc": ("beam", 1, "greedy (beam of 1)"),
-                         "no_leaf_cost_tree_acc": ("leaf_cost", 0.0, "no early-leaf cost"),
-                         "no_mention_cost_tree_acc": ("mention_cost", 0.0, "no action-mention check"),
-                         "no_question_cost_tree_acc": ("question_cost", 0.0, "no question-mention check"),
-                         "question_cost_1_tree_acc": ("question_cost", 1.0, "question-mention check at 1 nat"),
-                         "no_rule_cost_tree_acc": ("rule_cost", 0.0, "no stated-rule check"),
-                         "no_root_cost_tree_acc": ("root_cost", 0.0, "no stated-first-question check"),
                          "first_3_members_tree_acc": ("ensemble", 3, "its first 3 members"),
-                         "first_4_members_tree_acc": ("ensemble", 4, "its first 4 members"),
-                         "first_5_members_tree_acc": ("ensemble", 5, "its first 5 members"),
                          "no_findings_tree_acc": ("findings_cost", 0.0, "no learned findings")}
 
 
@@ -225,10 +217,3 @@ def kept_networks(folder: Path, domain: str, name: str, key: str, train_idx: Seq
 
 def read_runs(path: Path) -> list[dict]:
     return [json.loads(l) for l in path.read_text().splitlines() if l.strip()] if path.is_file() else []
-
-
-def held_out_writers(domain: str) -> dict[str, str]:
-    """Leave-writers-out fold key -> the writers it holds out (as `plan_folds` makes them)."""
-    specs = load_corpus(domain)
-    return {key: " + ".join(sorted({specs[i].writer for i in te}))
-            for key, _, te in plan_folds(specs, "writers", 1)}

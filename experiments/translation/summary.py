@@ -1,300 +1,228 @@
-"""The translation experiment's report: from the folds in `runs.jsonl` (written by
-`evaluate.run_experiment`), the Markdown and JSON tables and the bar figure under results/.
+"""The translation experiment's report: Table 1, one table per domain, from the folds that
+`evaluate.run_experiment` appends to runs.jsonl files.
 
-Every table reads the folds as recorded; a fold recorded twice counts once, and comparisons fold
-by fold pair only folds that one kind of CPU trained (a fold retrains bit for bit on its own kind).
+A row is a model; a column is a protocol, so every model's leave-writers-out and leave-trees-out
+accuracy sits beside its cross-validation. Below it: token accuracy, the decoding choices each
+measured against the same networks decoded without them, and the confidence's reliability. A fold
+recorded twice counts once. The long history of variants that lost stays in
+results/translation/history.md, made by the code of its day.
+
+    .venv/bin/python -m experiments.translation.summary --runs results/translation/v2/runs.jsonl \
+        --runs results/translation/runs.jsonl --out results/translation/table1.md
 """
 
 from __future__ import annotations
 
+import argparse
 import json
-from dataclasses import replace
 from pathlib import Path
 from statistics import mean, pstdev
-from typing import Sequence
+from typing import Iterable, Optional, Sequence
 
-from nl2policy.language.corpus import load_corpus
-from experiments.translation.evaluate import DECODING_ALTERNATIVES, held_out_writers, plan_folds, read_runs, unseen_trees
-from nl2policy.language.models.config import DEFAULT_MODEL, DEFAULT_NETWORKS, MODELS
-from experiments.translation.reproduction import (decoded_as, fold_machine, machine_kinds, machine_labels, reproduction_checks,
-                                              reproduction_lines)
+from experiments.translation.evaluate import DECODING_ALTERNATIVES, read_runs
+from nl2policy.language.models.config import DEFAULT_MODEL
 from nl2policy.language.translate import LOW_CONFIDENCE
 
 PAPER_HAN2TREE = {"taxi": 86.30, "highway": 80.38}
+"""Exact tree accuracy of the paper's HAN2Tree, 5-fold CV x 3 (Tambwekar et al., RA-L 2023, Table 1)."""
+PAPER_MODELS = ("seq2seq", "seq2tree", "seq2tree-minilm", "han2tree")
+"""The paper's four translators (MiniLM standing in for BERT), trained on round 1 as in the paper."""
+
+PROTOCOLS = {
+    "cv": "CV (round 1)",
+    "writers": "leave-writers-out (round 1)",
+    "cvboth": "CV, round 2 in training",
+    "writersboth": "leave-writers-out, round 2 in training",
+    "trees": "leave-trees-out (both rounds)",
+    "new": "new writers, new trees",
+}
+"""Table 1's columns, in order (evaluate.plan_folds defines each protocol)."""
+
+BINS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0001)
+"""The reliability table's bins of confidence."""
 
 
-def _one_per_fold(runs: list[dict]) -> list[dict]:
-    """The first record of each (domain, model, fold): a fold recorded twice (two processes on
-    one plan) must not count twice in a mean."""
+def one_per_fold(runs: Iterable[dict]) -> list[dict]:
+    """The first record of each (domain, model, fold): a fold recorded twice (two processes on one
+    plan, or one file read twice) must not count twice in a mean."""
     first: dict[tuple, dict] = {}
     for r in runs:
         first.setdefault((r["domain"], r["model"], r["fold"]), r)
     return list(first.values())
 
 
-def _by_row(runs: list[dict]) -> dict[tuple[str, str, str], list[dict]]:
-    """Folds grouped by table row: (domain, model, protocol)."""
-    rows: dict[tuple[str, str, str], list[dict]] = {}
+def rows(runs: Sequence[dict]) -> list[dict]:
+    """One row per (domain, model, protocol): its folds, tree/token/policy accuracy mean (std) over
+    them in percent, and whether every output was a valid tree."""
+    groups: dict[tuple[str, str, str], list[dict]] = {}
     for r in runs:
-        rows.setdefault((r["domain"], r["model"], r["protocol"]), []).append(r)
-    return rows
-
-
-def summarize(out: Path, command: str, budget: str, planned: Sequence[tuple[str, str, str, int]] = ()) -> Path:
-    """Markdown + JSON tables (mean (std) over folds) and a bar figure, from runs.jsonl."""
-    from nl2policy.report import provenance
-
-    runs = _one_per_fold(read_runs(out / "runs.jsonl"))
-    table = _by_row(runs)
-    labels = machine_labels(runs)
-    checks = reproduction_checks(runs)
-    kinds = machine_kinds(checks, labels)
-    rows = []
-    for (domain, model, protocol), rs in sorted(table.items()):
-        row = {"domain": domain, "model": model, "protocol": protocol, "folds": len(rs),
-               "all_valid": all(r["valid"] == r["n"] for r in rs), "train_pairs": rs[0]["train_pairs"],
-               "seconds_per_fold": round(mean(r["seconds"] for r in rs), 1),
-               "reused": all("networks_from" in r for r in rs),
-               "machines": {m: n for m in labels if (n := sum(fold_machine(r) == m for r in rs))}}
+        groups.setdefault((r["domain"], r["model"], r["protocol"]), []).append(r)
+    out = []
+    for (domain, model, protocol), rs in sorted(groups.items()):
+        row = {"domain": domain, "model": model, "protocol": protocol, "folds": len(rs), "n": sum(r["n"] for r in rs),
+               "all_valid": all(r["valid"] == r["n"] for r in rs)}
         for m in ("tree_acc", "token_acc", "policy_acc"):
             vals = [100 * r[m] for r in rs]
             row[m] = {"mean": round(mean(vals), 2), "std": round(pstdev(vals), 2)}
-        rows.append(row)
-    meta = provenance(command)
-    lines = ["# Translation accuracy (%), mean (std) over folds", "", f"Made by: `{command}`  ", f"On: {meta['made']}  ",
-             f"Budget and seeds: {budget}", "",
-             "Protocols: `cv` = 5-fold cross-validation, fold seeds 0..R-1 (R repeats, see folds column); "
-             "`writers` = leave-writers-out, 4 folds of 2 held-out writers (fold seed 0). "
-             "Model seed = repeat index. Paper's HAN2Tree (CV): taxi 86.30, highway 80.38.", "",
-             "Machines (folds retrain bit for bit only on the kind of CPU that first ran them; seconds per fold "
-             "depend on it and on the worker processes): " + "; ".join(f"{label} = {m}" for m, label in labels.items()) + ".",
-             *reproduction_lines(checks, kinds, labels), "",
-             *(["\\* decoded the networks another model trained on the same folds (python -m experiments.translation "
-                "--networks-from, evaluate.kept_networks): seconds of decoding only.", ""]
-               if any(r["reused"] for r in rows) else []),
-             "| domain | model | protocol | folds | tree acc | token acc | policy acc | all outputs valid | train pairs | s/fold | machine |",
-             "|---|---|---|---:|---:|---:|---:|---|---:|---:|---|"]
-    for r in rows:
-        cell = lambda m: f"{r[m]['mean']:.2f} ({r[m]['std']:.2f})"
-        lines.append(f"| {r['domain']} | {r['model']} | {r['protocol']} | {r['folds']} | {cell('tree_acc')} | "
-                     f"{cell('token_acc')} | {cell('policy_acc')} | {'yes' if r['all_valid'] else 'NO'} | "
-                     f"{r['train_pairs']} | {r['seconds_per_fold']}{' *' if r['reused'] else ''} | "
-                     f"{_machine_cell(r['machines'], labels)} |")
-    lines += _against_paper(rows)
-    lines += _writer_breakdown(runs)
-    lines += _decoding_effects(runs)
-    lines += _variants(runs, kinds)
-    lines += _calibration(runs)
-    lines += _unseen(runs, sorted({r["domain"] for r in rows}))
-    missing = [f"{d} {m} {p}: {want - len(table.get((d, m, p), []))} of {want} folds"
-               for d, m, p, want in planned if len(table.get((d, m, p), [])) < want]
-    if missing:
-        lines += ["", "**Planned but not run (stopped at the time budget):** " + "; ".join(missing) + "."]
-    (out / "translation.json").write_text(json.dumps({"meta": meta, "budget": budget, "rows": rows, "not_run": missing,
-                                                           "reproduction": [{"machines": list(p), "agree": a, "folds": n}
-                                                                            for p, (a, n) in sorted(checks.items())]}, indent=2))
-    md = out / "translation.md"
-    md.write_text("\n".join(lines) + "\n")
-    _figure(rows, out / "translation.png")
-    return md
+        out.append(row)
+    return out
 
 
-def _machine_cell(counts: dict[str, int], labels: dict[str, str]) -> str:
-    """"A" when one machine ran every fold of a row, else "A 13, B 2"."""
-    if len(counts) == 1:
-        return labels[next(iter(counts))]
-    return ", ".join(f"{labels[m]} {n}" for m, n in counts.items())
+def table_models(table: Sequence[dict]) -> list[str]:
+    """Table 1's models: the paper's four, then the default, then any other model the runs hold."""
+    models = {r["model"] for r in table}
+    first = [m for m in (*PAPER_MODELS, DEFAULT_MODEL) if m in models]
+    return first + sorted(models - set(first))
 
 
-PAPER_FOLDS = 15
-"""The paper's protocol: 5-fold cross-validation repeated 3 times."""
-CV_REPEATS = PAPER_FOLDS // 5
+def table_one(table: Sequence[dict], domain: str, metric: str = "tree_acc") -> list[str]:
+    """One domain's table: a row per model, a column per protocol, mean (std) [folds]."""
+    mine = [r for r in table if r["domain"] == domain]
+    protocols = [p for p in PROTOCOLS if any(r["protocol"] == p for r in mine)]
+    cell = {(r["model"], r["protocol"]): r for r in mine}
+    lines = ["| model | " + " | ".join(PROTOCOLS[p] for p in protocols) + " |", "|---" + "|---:" * len(protocols) + "|"]
+    for model in table_models(mine):
+        cells = []
+        for p in protocols:
+            r = cell.get((model, p))
+            cells.append("-" if r is None else f"{r[metric]['mean']:.2f} ({r[metric]['std']:.2f}) [{r['folds']}]")
+        lines.append(f"| {model} | " + " | ".join(cells) + " |")
+    return lines
 
 
-def _against_paper(rows: list[dict]) -> list[str]:
-    """Per domain, the model with the best cross-validated tree accuracy over the paper's protocol
-    (rows with fewer folds are left out: one repeat moves by points with the training run alone),
-    its leave-writers-out accuracy where it ran, and the paper's HAN2Tree beside it."""
+def decoding_effects(runs: Sequence[dict]) -> list[str]:
+    """Each decoding choice a fold recorded (evaluate.DECODING_ALTERNATIVES: a beam, the learned
+    findings) against the same networks decoded without it, on the same folds."""
     lines = []
-    for domain in sorted({r["domain"] for r in rows}):
-        full = [r for r in rows if r["domain"] == domain and r["protocol"] == "cv" and r["folds"] >= PAPER_FOLDS]
-        if not full or domain not in PAPER_HAN2TREE:
-            continue
-        best = max(full, key=lambda r: r["tree_acc"]["mean"])
-        writers = [r for r in rows if r["domain"] == domain and r["model"] == best["model"] and r["protocol"] == "writers"]
-        held = (f"{writers[0]['tree_acc']['mean']:.2f} ({writers[0]['folds']} of 4 folds)" if writers else "not run")
-        paper = PAPER_HAN2TREE[domain]
-        lines.append(f"| {domain} | {best['model']} | {best['tree_acc']['mean']:.2f} ({best['tree_acc']['std']:.2f}) | "
-                     f"{held} | {paper:.2f} | {'yes' if best['tree_acc']['mean'] >= paper else 'no'} |")
+    groups: dict[tuple[str, str, str, str], list[dict]] = {}
+    for r in runs:
+        for key in DECODING_ALTERNATIVES:
+            if key in r:
+                groups.setdefault((r["domain"], r["model"], r["protocol"], key), []).append(r)
+    for (domain, model, protocol, key), rs in sorted(groups.items()):
+        pairs = [(100 * r["tree_acc"], 100 * r[key]) for r in rs]
+        lines.append(f"| {domain} | {model} | {protocol} | {len(rs)} | {DECODING_ALTERNATIVES[key][2]} | "
+                     f"{mean(a for a, _ in pairs):.2f} | {mean(b for _, b in pairs):.2f} | "
+                     f"{sum(a > b for a, b in pairs)} / {sum(a < b for a, b in pairs)} |")
     if not lines:
         return []
-    return ["", f"## Best model against the paper (cross-validated over at least {PAPER_FOLDS} folds, as the paper)", "",
-            "| domain | best model | CV tree acc | leave-writers-out tree acc | paper's HAN2Tree (CV) | at or above the paper |",
+    return ["| domain | model | protocol | folds | compared with | tree acc, as configured | tree acc, compared | "
+            "folds better / worse |", "|---|---|---|---:|---|---:|---:|---|"] + lines
+
+
+def reliability(runs: Sequence[dict]) -> list[str]:
+    """Per (domain, model, protocol) whose folds record each translation's confidence: exact
+    accuracy (and count) in each bin of confidence, the accuracy of the translations at or above
+    the app's low-confidence threshold, and the share below it, which the app flags."""
+    groups: dict[tuple[str, str, str], list[tuple[float, bool]]] = {}
+    for r in runs:
+        if "confidence" in r:
+            groups.setdefault((r["domain"], r["model"], r["protocol"]), []).extend((c, bool(ok)) for _, c, ok in r["confidence"])
+    if not groups:
+        return []
+    heads = [f"{lo:.1f}-{min(hi, 1.0):.1f}" for lo, hi in zip(BINS, BINS[1:])]
+    lines = ["| domain | model | protocol | " + " | ".join(heads) + f" | acc at >= {LOW_CONFIDENCE} | flagged |",
+             "|---|---|---" + "|---:" * (len(heads) + 2) + "|"]
+    for (domain, model, protocol), items in sorted(groups.items()):
+        cells = []
+        for lo, hi in zip(BINS, BINS[1:]):
+            inside = [ok for c, ok in items if lo <= c < hi]
+            cells.append(f"{100 * sum(inside) / len(inside):.0f} ({len(inside)})" if inside else "- (0)")
+        sure = [ok for c, ok in items if c >= LOW_CONFIDENCE]
+        flagged = 100 * (len(items) - len(sure)) / len(items)
+        lines.append(f"| {domain} | {model} | {protocol} | " + " | ".join(cells) + " | "
+                     + (f"{100 * sum(sure) / len(sure):.1f}" if sure else "-") + f" | {flagged:.1f}% |")
+    return lines
+
+
+def against_paper(table: Sequence[dict]) -> list[str]:
+    """The default's CV on round 1 (alone, or with round 2 joining training) beside the paper's
+    HAN2Tree, with its leave-writers-out beside it."""
+    cell = {(r["domain"], r["model"], r["protocol"]): r for r in table}
+    lines = []
+    for domain, paper in PAPER_HAN2TREE.items():
+        for cv, writers in (("cv", "writers"), ("cvboth", "writersboth")):
+            r = cell.get((domain, DEFAULT_MODEL, cv))
+            if r is None:
+                continue
+            w = cell.get((domain, DEFAULT_MODEL, writers))
+            lines.append(f"| {domain} | {PROTOCOLS[cv]} | {r['tree_acc']['mean']:.2f} [{r['folds']} folds] | "
+                         f"{w['tree_acc']['mean']:.2f} [{w['folds']} folds] | " if w else
+                         f"| {domain} | {PROTOCOLS[cv]} | {r['tree_acc']['mean']:.2f} [{r['folds']} folds] | not run | ")
+            lines[-1] += f"{paper:.2f} | {'yes' if r['tree_acc']['mean'] >= paper else 'no'} |"
+    if not lines:
+        return []
+    return [f"| domain | {DEFAULT_MODEL} on | CV exact | leave-writers-out exact | paper's HAN2Tree (CV) | at or above |",
             "|---|---|---:|---:|---:|---|"] + lines
 
 
-def _decoding_effects(runs: list[dict]) -> list[str]:
-    """Models decoded with a beam, an early-leaf cost or more than 3 members also record the same
-    networks on the same folds decoded with less of it: each choice's own effect, side by side.
-    CV repeat 0 gets its own line because the experimental leaf cost was chosen on an exploratory
-    run of those folds."""
-    lines = []
-    for key, (_, _, label) in DECODING_ALTERNATIVES.items():
-        groups: dict[tuple[str, str, str], list[dict]] = {}
-        for r in runs:
-            if key in r:
-                part = r["protocol"] if r["protocol"] != "cv" else ("cv, repeat 0" if "-r0-" in r["fold"] else "cv, repeats 1+")
-                groups.setdefault((r["domain"], r["model"], part), []).append(r)
-        for (domain, model, part), rs in sorted(groups.items()):
-            same = decoded_as(model, key)
-            lines.append(f"| {domain} | {model} | {part} | {len(rs)} | {label}{' (= ' + ', '.join(same) + ')' if same else ''} | "
-                         + _paired_cells([(100 * r["tree_acc"], 100 * r[key]) for r in rs]))
-    if not lines:
-        return []
-    return ["", "## Decoding choices, each against the same trained networks decoded with less of it (same folds)", "",
-            "| domain | model | folds | n | compared with | tree acc, as configured | tree acc, compared | folds better / worse |",
-            "|---|---|---|---:|---|---:|---:|---|"] + lines
+def summarize(runs_files: Sequence[Path], md: Path, command: str, budget: str,
+              planned: Sequence[tuple[str, str, str, int]] = (), models: Optional[dict[str, str]] = None) -> Path:
+    """Table 1 and the tables below it, as Markdown at `md` (and JSON beside it), from the folds
+    in `runs_files`; `planned`: (domain, model, protocol, folds) a plan asked for, to list what
+    has not run yet; `models`: the recorded models to show, each under the name to show it by
+    (a recipe recorded under an older name), None: all of them."""
+    from nl2policy.report import provenance
+
+    runs = [r for path in runs_files for r in read_runs(path) if models is None or r["model"] in models]
+    runs = one_per_fold(dict(r, model=models[r["model"]]) if models else r for r in runs)
+    table = rows(runs)
+    meta = provenance(command)
+    lines = ["# Translation accuracy (%): Table 1", "", f"Made by: `{command}`  ", f"On: {meta['made']}  ",
+             f"Budget and seeds: {budget}", "",
+             "Each cell: mean (std) over folds [folds]. Protocols (experiments/translation/evaluate.py, plan_folds): "
+             "CV = 5-fold cross-validation, repeat r with fold seed r; leave-writers-out = 4 folds of 2 held-out writers; "
+             "\"round 2 in training\" = the same round-1 test folds with every round-2 spec added to training; "
+             "leave-trees-out = 5 folds of held-out policies over both rounds; new writers, new trees = each round-2 "
+             "writer held out with every policy they describe. Paper's HAN2Tree (CV, 5x3): taxi 86.30, highway 80.38 "
+             "(Tambwekar et al., RA-L 2023).", ""]
+    for domain in sorted({r["domain"] for r in table}):
+        lines += [f"## {domain}: exact tree accuracy", "", *table_one(table, domain), ""]
+    paper = against_paper(table)
+    if paper:
+        lines += ["## The default against the paper", "", *paper, ""]
+    invalid = [f"{r['domain']} {r['model']} {r['protocol']}" for r in table if not r["all_valid"]]
+    lines += [f"Every output is a valid tree: {'yes' if not invalid else 'NO: ' + '; '.join(invalid)} "
+              f"({sum(r['n'] for r in table)} translations).", ""]
+    for domain in sorted({r["domain"] for r in table}):
+        lines += [f"## {domain}: token accuracy (15-slot grid)", "", *table_one(table, domain, "token_acc"), ""]
+    effects = decoding_effects(runs)
+    if effects:
+        lines += ["## Decoding choices against the same networks decoded without them", "", *effects, ""]
+    reliable = reliability(runs)
+    if reliable:
+        lines += ["## Confidence: exact accuracy (%) and translations per bin of confidence", "",
+                  "Confidence = the product of the tree's node probabilities (what `translate` reports for an on-topic "
+                  f"text); the app flags a translation below {LOW_CONFIDENCE}.", "", *reliable, ""]
+    have = {(r["domain"], r["model"], r["protocol"]): r["folds"] for r in table}
+    missing = [f"{d} {m} {p}: {want - have.get((d, m, p), 0)} of {want} folds"
+               for d, m, p, want in planned if have.get((d, m, p), 0) < want]
+    if missing:
+        lines += ["**Planned but not run yet:** " + "; ".join(missing) + ".", ""]
+    md.parent.mkdir(parents=True, exist_ok=True)
+    md.write_text("\n".join(lines))
+    md.with_suffix(".json").write_text(json.dumps({"meta": meta, "budget": budget, "rows": table, "not_run": missing},
+                                                  indent=2))
+    return md
 
 
-VARIANT_FIELDS = ("encoder", "decoder", "minilm", "minilm_layers")
-"""What makes a model a variant of the default: the same kind of network, also trained on synthetic
-pairs (see `is_variant`), differing in how many are trained, on how much of which data, how wide,
-or how they are decoded."""
+def main() -> None:
+    ap = argparse.ArgumentParser(description="Table 1 from one or more runs.jsonl files")
+    ap.add_argument("--runs", type=Path, action="append", required=True, help="a runs.jsonl (repeatable)")
+    ap.add_argument("--out", type=Path, required=True, help="the Markdown file to write (JSON beside it)")
+    ap.add_argument("--model", action="append", default=None,
+                    help="a recorded model to show, as NAME or NAME=SHOWN (repeatable; default: every model)")
+    args = ap.parse_args()
+    models = None if args.model is None else dict(m.split("=", 1) if "=" in m else (m, m) for m in args.model)
+    missing = [p for p in args.runs if not p.is_file()]
+    if missing:
+        raise SystemExit(f"error: no such runs file: {missing[0]}")
+    command = (".venv/bin/python -m experiments.translation.summary " + " ".join(f"--runs {p}" for p in args.runs)
+               + "".join(f" --model {m}" for m in args.model or ()) + f" --out {args.out}")
+    md = summarize(args.runs, args.out, command, "as recorded with each fold (the commands in each runs file's folder)",
+                   models=models)
+    print(md.read_text())
 
 
-def is_variant(name: str, base: str = DEFAULT_NETWORKS) -> bool:
-    """Whether `name` is a variant of `base` (VARIANT_FIELDS equal, and both trained with synthetic
-    pairs or both without: the models without them are the ablation, set beside one another in the
-    main table)."""
-    if name not in MODELS or name == base:
-        return False
-    cfg, ref = MODELS[name], MODELS[base]
-    return all(getattr(cfg, f) == getattr(ref, f) for f in VARIANT_FIELDS) and bool(cfg.synthetic) == bool(ref.synthetic)
-
-
-def _variants(runs: list[dict], kinds: dict[str, str], base: str = DEFAULT_NETWORKS) -> list[str]:
-    """Each variant of the default's networks (`base`, DEFAULT_NETWORKS; see is_variant) beside
-    them on exactly the folds both ran on the same kind of machine (`kinds`: machine_kinds): a
-    variant run on repeat 0 only must not be read against the default's mean over three repeats,
-    since one fold moves by several points with the training run alone, and a fold retrained on
-    another kind of CPU is another training run."""
-    key = lambda r: (r["domain"], r["fold"], kinds.get(fold_machine(r), fold_machine(r)))
-    ref = {key(r): 100 * r["tree_acc"] for r in runs if r["model"] == base}
-    rows = _by_row([r for r in runs if is_variant(r["model"], base) and key(r) in ref])
-    if not rows:
-        return []
-    title = (f"the default ({base})" if base == DEFAULT_MODEL else
-             f"the default's networks ({base}; the default, {DEFAULT_MODEL}, decodes them with more checks)")
-    lines = ["", f"## Variants of {title}, each beside them on the same folds", "",
-             "| domain | variant | protocol | folds | variant tree acc | default tree acc | folds better / worse |",
-             "|---|---|---|---:|---:|---:|---|"]
-    for (domain, model, protocol), rs in sorted(rows.items()):
-        lines.append(f"| {domain} | {model} | {protocol} | {len(rs)} | "
-                     + _paired_cells([(100 * r["tree_acc"], ref[key(r)]) for r in rs]))
-    reruns = sorted({m for _, m, _ in rows if is_rerun(m, base)})
-    if reruns:
-        lines += ["", f"{', '.join(reruns)}: the default's own recipe trained again with other seeds (initial weights and "
-                  "draws of augmented and synthetic pairs), not a change to it. "
-                  + ("Its distance" if len(reruns) == 1 else "Their distance") + " from the default is what "
-                  "another training run alone moves, the yardstick for the other rows."]
-    return lines
-
-
-def is_rerun(name: str, base: str = DEFAULT_NETWORKS) -> bool:
-    """Whether `name` is `base` with other seeds only (ModelConfig.seed_offset)."""
-    cfg, ref = MODELS.get(name), MODELS[base]
-    return cfg is not None and cfg.seed_offset != ref.seed_offset and replace(cfg, seed_offset=ref.seed_offset) == ref
-
-
-def _paired_cells(pairs: list[tuple[float, float]]) -> str:
-    """The last three cells of a paired-comparison row: both means and folds better / worse."""
-    return (f"{mean(a for a, _ in pairs):.2f} | {mean(b for _, b in pairs):.2f} | "
-            f"{sum(a > b for a, b in pairs)} / {sum(a < b for a, b in pairs)} |")
-
-
-def _writer_breakdown(runs: list[dict]) -> list[str]:
-    """Tree accuracy per held-out writer pair: which writing styles a model fails to read."""
-    runs = [r for r in runs if r["protocol"] == "writers"]
-    if not runs:
-        return []
-    lines = ["", "Leave-writers-out tree accuracy (%) per held-out writer pair:", ""]
-    for domain in sorted({r["domain"] for r in runs}):
-        names = held_out_writers(domain)
-        keys = sorted(names)
-        lines += [f"| {domain} | " + " | ".join(names[k] for k in keys) + " |", "|---" * (len(keys) + 1) + "|"]
-        for model in sorted({r["model"] for r in runs if r["domain"] == domain}):
-            acc = {r["fold"]: 100 * r["tree_acc"] for r in runs if r["domain"] == domain and r["model"] == model}
-            lines.append(f"| {model} | " + " | ".join(f"{acc[k]:.0f}" if k in acc else "not run" for k in keys) + " |")
-        lines.append("")
-    return lines
-
-
-def _pct(part: int, whole: int) -> str:
-    """A share of a pooled count, in percent, or "-" when there is nothing to share."""
-    return f"{100 * part / whole:.1f}" if whole else "-"
-
-
-def _calibration(runs: list[dict]) -> list[str]:
-    """Pooled over folds: how many translations are confident, and how often each kind is right.
-    A useful confidence makes the confident ones right far more often than the unsure ones."""
-    runs = [r for r in runs if "confident" in r]
-    if not runs:
-        return []
-    lines = ["", f"Confidence (test descriptions pooled over folds; confident = node-probability product >= {LOW_CONFIDENCE}):", "",
-             "| domain | model | protocol | confident share | tree acc when confident | tree acc when unsure |",
-             "|---|---|---|---:|---:|---:|"]
-    for (domain, model, protocol), rs in sorted(_by_row(runs).items()):
-        n, sure = sum(r["n"] for r in rs), sum(r["confident"] for r in rs)
-        lines.append(f"| {domain} | {model} | {protocol} | {_pct(sure, n)} | {_pct(sum(r['confident_right'] for r in rs), sure)} | "
-                     f"{_pct(sum(r['unsure_right'] for r in rs), n - sure)} |")
-    return lines
-
-
-def _unseen(runs: list[dict], domains: list[str]) -> list[str]:
-    """How many test descriptions have a tree that no training description has (from the folds
-    alone, no model), and, for the folds that record it, each model's accuracy on those and on
-    the rest. Whether a model can compose a tree it never saw decides most of what it misses."""
-    lines = ["", "## Trees no training description has", "",
-             f"Test descriptions whose tree no description of their training fold has (the folds of {CV_REPEATS} CV "
-             "repeats, and of leave-writers-out):", "", "| domain | protocol | test descriptions | tree unseen in training | share (%) |",
-             "|---|---|---:|---:|---:|"]
-    for domain in domains:
-        specs = load_corpus(domain)
-        for protocol, repeats in (("cv", CV_REPEATS), ("writers", 1)):
-            flags = [u for _, tr, te in plan_folds(specs, protocol, repeats) for u in unseen_trees(specs, tr, te)]
-            lines.append(f"| {domain} | {protocol} | {len(flags)} | {sum(flags)} | {_pct(sum(flags), len(flags))} |")
-    recorded = [r for r in runs if "unseen" in r]
-    if recorded:
-        lines += ["", "Tree accuracy (%) on those and on the rest, test descriptions pooled over the folds that record it:", "",
-                  "| domain | model | protocol | folds | unseen trees | acc on unseen | acc on seen |", "|---|---|---|---:|---:|---:|---:|"]
-        for (domain, model, protocol), rs in sorted(_by_row(recorded).items()):
-            n, unseen = sum(r["n"] for r in rs), sum(r["unseen"] for r in rs)
-            right, unseen_right = round(sum(r["tree_acc"] * r["n"] for r in rs)), sum(r["unseen_right"] for r in rs)
-            lines.append(f"| {domain} | {model} | {protocol} | {len(rs)} | {unseen} | {_pct(unseen_right, unseen)} | "
-                         f"{_pct(right - unseen_right, n - unseen)} |")
-    return lines
-
-
-def _figure(rows: list[dict], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    domains = sorted({r["domain"] for r in rows})
-    fig, axes = plt.subplots(1, len(domains), figsize=(6 * len(domains), 4), squeeze=False)
-    for ax, domain in zip(axes[0], domains):
-        rs = [r for r in rows if r["domain"] == domain]
-        labels = [f"{r['model']}\n{r['protocol']}" for r in rs]
-        ax.bar(range(len(rs)), [r["tree_acc"]["mean"] for r in rs], yerr=[r["tree_acc"]["std"] for r in rs],
-               color=["tab:blue" if r["protocol"] == "cv" else "tab:orange" for r in rs])
-        if domain in PAPER_HAN2TREE:
-            ax.axhline(PAPER_HAN2TREE[domain], color="k", ls="--", lw=1, label="paper HAN2Tree (CV)")
-            ax.legend(loc="lower right", fontsize=8)
-        ax.set_xticks(range(len(rs)), labels, rotation=60, ha="right", fontsize=7)
-        ax.set_ylabel("exact tree accuracy (%)")
-        ax.set_ylim(0, 100)
-        ax.set_title(f"{domain}: blue = CV, orange = leave-writers-out")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+if __name__ == "__main__":
+    main()

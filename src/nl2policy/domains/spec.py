@@ -100,6 +100,12 @@ class Domain:
     one_hot: tuple[str, ...] = ()  # features of which exactly one is 1 (taxi's place); see uniform_states
 
     @cached_property
+    def phrases(self) -> dict[str, dict]:
+        """How the synthetic generator words this domain (phrases/NAME.toml): `questions` (per id:
+        pos, neg, short, short_no), `actions` and `reasons` (per id: lists of wordings)."""
+        return tomllib.loads((SPEC_DIR / "phrases" / f"{self.name}.toml").read_text())
+
+    @cached_property
     def exact(self) -> Optional[ExactModel]:
         """The exact model where the domain has one (taxi), else None (highway): what lets
         the policy code score a tree without sampling, asked for as a capability."""

@@ -1,6 +1,6 @@
 """Grammar-constrained decoding of a trained translator: the beam search over the ensemble's
-averaged step probabilities, the running decoder state it reorders, and the final choice among
-its hypotheses (with the optional action-mention check).
+averaged step probabilities, weighed by the text's learned findings (findings.py), and the
+running decoder state it reorders.
 
 Every step is masked by the grammar (grammar.py), so every output is a valid tree of the domain;
 each node's probability comes back with the tree, for the confidence score.
@@ -9,42 +9,40 @@ each node's probability comes back with the tree, for the confidence score.
 from __future__ import annotations
 
 import math
-from functools import partial
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING, Optional, Sequence
 
 import torch
 
 from nl2policy.domains import get_domain
 from nl2policy.language.grammar import Slot, allowed_tokens, next_slot
-from nl2policy.language.mentions import named_actions, named_questions, unasked_questions, unmet_mentions
 from nl2policy.language.models.network import Batch, StackedDecoder, StackedEncoder
-from nl2policy.language.stated_rules import broken_rules, first_question, stated_rules
 from nl2policy.trees import Tree, from_tokens
 
 if TYPE_CHECKING:
+    from nl2policy.language.findings import Findings
     from nl2policy.language.translator import TrainedTranslator
 
 MAX_STEPS = 15
 
 
-def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> list[tuple[Tree, dict[int, float]]]:
+def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str],
+                found: Optional[Sequence[Findings]] = None) -> list[tuple[Tree, dict[int, float]]]:
     """Beam search under the grammar mask over the members' averaged step probabilities
     (`model.beam` hypotheses per description; 1 is greedy). A tree's score is the sum of its
     nodes' log-probabilities, so a subtree the text does not support costs its every node
-    (the reported probabilities stay the model's own). With a `mention_cost`, the final choice among the beam's hypotheses also
-    pays that many nats for each action the text names (language/mentions.py) that the tree
-    never takes, with a `question_cost`, that many for each question the text asks that the
-    tree never does, and with a `rule_cost`, that many for each rule the text states that the tree
-    breaks (language/stated_rules.py). A `root_cost` is paid inside the search, at the first step,
-    by every root but the question the text says to ask first (stated_rules.first_question), so the
-    beam explores trees under the stated root rather than only rejecting others at the end."""
+    (the reported probabilities stay the model's own). With a `findings_cost`, the score also
+    adds that many times the log-probability the text's findings (`found`, one per text; read
+    here when not given) give the tree's question set, action set and root, paid part by part as
+    the tree takes shape, so the beam explores the trees the text was read to describe."""
     vocab = get_domain(model.domain).vocab
     names = model.tree_tokens
     index = {t: i for i, t in enumerate(names)}
-    mention_cost, question_cost, rule_cost, root_cost, findings_cost = (
-        model.decoding(c) for c in ("mention_cost", "question_cost", "rule_cost", "root_cost", "findings_cost"))
+    findings_cost = model.decoding("findings_cost")
     B, K = len(texts), max(1, model.beam or model.cfg.beam)
-    found = model.findings.read(texts) if findings_cost and model.findings is not None else None
+    if not findings_cost or model.findings is None:
+        found = None
+    elif found is None:
+        found = model.findings.read(texts)
     if found is not None:
         # a tree's findings term, log P(its question set, action set, root), split over the search:
         # a label's log P(present) when a node first uses it, the root's log-probability at the
@@ -87,11 +85,6 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
             score = score + findings_cost * (absent.repeat_interleave(K, 0) * ~used * fresh[:, None]).sum(-1).view(B, K)
             charged = charged | done
         logp = torch.where(mask, p.clamp(min=1e-12).log(), torch.tensor(-math.inf))
-        if root_cost and step == 0:  # the root: where the text says which question comes first
-            for b, text in enumerate(texts):
-                first = first_question(model.domain, text)
-                if first is not None:
-                    logp[b * K:(b + 1) * K] -= root_cost * (torch.arange(len(names)) != index[first])
         if found is not None:  # the learned findings, paid as the tree takes shape (findings.py)
             logp = logp + findings_cost * present.repeat_interleave(K, 0) * ~used
             if step == 0:
@@ -117,19 +110,6 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str]) -> lis
     trees = [from_tokens(p, vocab) if p and next_slot(p, vocab) is None else None for p in prefixes]
     if found is not None:  # those that finished at the last step
         score = score + findings_cost * (absent.repeat_interleave(K, 0) * ~used * ~charged[:, None]).sum(-1).view(B, K)
-    # the final choice's checks: (cost, what the text names, what of it a tree leaves out)
-    asked = partial(named_questions, forms=model.cfg.question_forms)
-    stated = partial(stated_rules, forms=model.cfg.rule_forms)
-    for cost, named_in, left_out in ((mention_cost, named_actions, unmet_mentions),
-                                     (question_cost, asked, unasked_questions),
-                                     (rule_cost, stated, broken_rules)):
-        if not cost:
-            continue
-        for b, text in enumerate(texts):
-            named = named_in(model.domain, text)
-            for k in range(K):
-                if named and trees[b * K + k] is not None:
-                    score[b, k] -= cost * len(left_out(model.domain, text, trees[b * K + k], named))
     top = score.argmax(-1)  # beams stay sorted, but finished ones may have been overtaken
     return [(trees[b * K + int(k)], probs[b * K + int(k)]) for b, k in enumerate(top)]
 
@@ -139,14 +119,14 @@ class DecoderState:
     (a node's children are fed its state), the tokens chosen, the last attention context.
 
     Kept as tensors with a step axis, so the beam search reorders hypotheses with one index per
-    tensor. Flat encoders run all members at once (StackedEncoder, StackedDecoder); the
-    hierarchical one (or any, with `stack_members` off), member by member: same arithmetic."""
+    tensor. The shipped network runs all members at once (StackedEncoder, StackedDecoder); the
+    lab's baselines (or any, with `stack_members` off), member by member: same arithmetic."""
 
     def __init__(self, model: TrainedTranslator, batch: Batch, copies: int = 1) -> None:
         """`copies` hypotheses per description (rows b*copies ... b*copies+copies-1): each
         description is encoded once, then its memory repeated."""
         self.nets = model.nets[:model.ensemble] if model.ensemble else model.nets
-        stack = model.cfg.encoder == "flat" and model.stack_members
+        stack = model.stack_members and all(net.stackable for net in self.nets)
         memories = StackedEncoder(self.nets).encode(batch) if stack else [net.encode(batch) for net in self.nets]
         self.memories = [{k: v.repeat_interleave(copies, 0) for k, v in m.items()} for m in memories]
         h0 = torch.stack([m["h0"] for m in self.memories])  # (E, B, h)

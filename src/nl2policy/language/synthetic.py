@@ -14,14 +14,12 @@ trees with fresh wordings.
 from __future__ import annotations
 
 import random
-from typing import Callable, Iterator, Sequence
+from typing import Callable, Sequence
 
 from nl2policy.domains import get_domain
 from nl2policy.language.augment import TEXTING
-from nl2policy.language.phrases import ACTIONS, ASIDES, FILLER, QUESTIONS, REASONS, SUMMARIES, UNUSED_ACTIONS, code_names
-from nl2policy.trees import MAX_DEPTH, Leaf, Node, Tree, TreeError, Vocabulary, to_tokens
-from nl2policy.trees.parse import validate
-from nl2policy.trees.tree import questions_used
+from nl2policy.language.phrases import ASIDES, FILLER, SUMMARIES, UNUSED_ACTIONS, code_names
+from nl2policy.trees import MAX_DEPTH, Leaf, Node, Tree, Vocabulary, to_tokens
 
 LEAF_PROB = (0.0, 0.35, 0.55, 1.0)
 """Chance that a slot at depth d is an action: the corpus has no bare-action trees and
@@ -47,7 +45,8 @@ Path = tuple[bool, ...]
 
 class _Words:
     def __init__(self, domain: str, rng: random.Random) -> None:
-        self.q, self.a, self.why, self.rng = QUESTIONS[domain], ACTIONS[domain], REASONS[domain], rng
+        phrases = get_domain(domain).phrases
+        self.q, self.a, self.why, self.rng = phrases["questions"], phrases["actions"], phrases["reasons"], rng
 
     def pick(self, options: Sequence[str]) -> str:
         return self.rng.choice(list(options))
@@ -146,12 +145,12 @@ def _texting(text: str, rng: random.Random) -> str:
 
 def _asides(tree: Tree, domain: str, w: _Words) -> list[str]:
     """One or two sentences about questions or actions the tree leaves out."""
-    used_q = {t for t in to_tokens(tree) if t in QUESTIONS[domain]}
-    used_a = {t for t in to_tokens(tree) if t in ACTIONS[domain]}
+    used_q = {t for t in to_tokens(tree) if t in w.q}
+    used_a = {t for t in to_tokens(tree) if t in w.a}
     out = []
     for _ in range(w.rng.choice([1, 1, 2])):
-        free_q = [q for q in QUESTIONS[domain] if q not in used_q]
-        free_a = [a for a in ACTIONS[domain] if a not in used_a]
+        free_q = [q for q in w.q if q not in used_q]
+        free_a = [a for a in w.a if a not in used_a]
         if free_q and (not free_a or w.rng.random() < 0.7):
             q = w.short(w.pick(free_q))
             out.append(w.pick(ASIDES).format(q=q, Q=q[0].upper() + q[1:]))

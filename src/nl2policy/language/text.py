@@ -1,7 +1,7 @@
 """Tokens and sentences from free-form descriptions, whatever the writer's style.
 
 Writers text in lowercase with abbreviations ("ur", "b/c", "ppl"), write numbered steps
-and bullets, pseudo-code with made-up camelCase names ("gotRider"), and arrows ("->", "→").
+and bullets, pseudo-code with camelCase names ("hasPassenger"), and arrows ("->", "→").
 The translators see one normalised stream of lowercase word tokens, grouped in sentences
 (HAN2Tree attends per sentence). Each token keeps the character span it came from, so the
 contextual MiniLM vectors, which are computed on the raw text, can be aligned to it.

@@ -3,11 +3,11 @@ description into a valid tree with a confidence and warnings.
 
 A description that is empty raises `EmptyDescription`; one that is off-topic or about the
 other domain still gets a (valid) tree, but with a low confidence and a warning saying why,
-so no caller mistakes it for a confident answer. A tree that never takes an action the text
-plainly names ("drive to the city"), or never asks a question the text asks ("if it is in the
-city"), is flagged too: the writers' own trees almost never do that (language/mentions.py), so it
-points at the branch to check. So is a tree that breaks a rule the text states, or that asks
-another question first than the one the text says to ask first (language/stated_rules.py).
+so no caller mistakes it for a confident answer. Where the tree and the text's learned findings
+(language/findings.py, the same reading decoding weighs) disagree, a warning says where: an
+action the text seems to take, or a question it seems to ask, that the tree never uses; a
+question the tree asks that the text does not seem to; another question first than the one the
+text seems to ask first.
 """
 
 from __future__ import annotations
@@ -25,18 +25,20 @@ import torch
 from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.dataset import member_pairs
-from nl2policy.language.findings import FindingsModel
+from nl2policy.language.findings import Findings, FindingsModel
 from nl2policy.language.members import default_workers, is_current
-from nl2policy.language.mentions import unasked_questions, unmet_mentions
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS, ModelConfig
 from nl2policy.language.models.pretrained import MiniLMCache
-from nl2policy.language.stated_rules import broken_rules, first_question
 from nl2policy.language.text import tokenize
 from nl2policy.language.train import fit
 from nl2policy.language.translator import TrainedTranslator
 from nl2policy.trees import Tree, tree_to_json
+from nl2policy.trees.tree import iter_leaves, questions_used
 
 LOW_CONFIDENCE = 0.5
+FINDING = 0.5
+"""A finding counts for the warnings where its probability is at least this (the classifier's own
+decision threshold: no value fitted to descriptions)."""
 STOPWORDS = set("the a an to of and or if is it in on at for be i you my your we this that there not no yes then".split())
 
 
@@ -218,23 +220,40 @@ def translate(domain: str, text: str, name: str = DEFAULT_MODEL) -> Translation:
     if not isinstance(text, str) or not tokenize(text):
         raise EmptyDescription("the description is empty: write what the policy should do")
     loaded = get_model(domain, name)
-    tree, node_probs = loaded.translator.predict([text])[0]
+    found = loaded.translator.read_findings([text])  # read once: decoding weighs it, the warnings quote it
+    tree, node_probs = loaded.translator.predict([text], found=found)[0]
     seq_prob = tree_probability(node_probs)
     factor, warnings = check_topic(domain, text, loaded.lexicon)
     confidence = max(0.0, min(1.0, seq_prob * factor))
     if confidence < LOW_CONFIDENCE:
         warnings.append(f"low confidence ({confidence:.2f}): check the tree before using it")
-    for action in sorted(unmet_mentions(domain, text, tree)):
-        said = get_domain(domain).vocab.actions[action].lower()
-        warnings.append(f"the description says to {said} ({action}), but the tree never does: check where it should")
-    for question in sorted(unasked_questions(domain, text, tree, forms="extended")):
-        warnings.append(f"the description asks \"{_asks(domain, question)}?\" ({question}), but the tree never does: "
-                        "check where it should")
-    for rule in broken_rules(domain, text, tree, forms="extended"):  # like the questions: all forms, whatever the model's check reads
-        does = "does not always do that there" if rule.every else "never does that there"
-        warnings.append(f"the description says \"{rule.text}\", but the tree {does}: check that branch")
-    first = first_question(domain, text)
-    if first is not None and getattr(tree, "question", None) != first:
-        warnings.append(f"the description says to ask first \"{_asks(domain, first)}?\" ({first}), but the tree asks "
-                        "something else first: check its top")
+    if found is not None and factor == 1.0:  # off-topic text: its findings mean nothing
+        warnings += disagreements(domain, tree, found[0])
     return Translation(tree, confidence, warnings, {k: v * factor for k, v in node_probs.items()})
+
+
+def disagreements(domain: str, tree: Tree, found: Findings) -> list[str]:
+    """Warnings for each place the tree and the text's findings disagree, most likely first in kind:
+    what the text seems to say that the tree leaves out, what the tree asks that the text does not
+    seem to, and the root."""
+    actions = get_domain(domain).vocab.actions
+    asked, taken = questions_used(tree), {leaf.action for leaf in iter_leaves(tree)}
+    out = []
+    for action, p in sorted(found.takes.items(), key=lambda kv: -kv[1]):
+        if p >= FINDING and action not in taken:
+            out.append(f"the description seems ({p:.0%}) to say to {actions[action].lower()} ({action}), but the tree "
+                       "never does: check where it should")
+    for question, p in sorted(found.asks.items(), key=lambda kv: -kv[1]):
+        if p >= FINDING and question not in asked:
+            out.append(f"the description seems ({p:.0%}) to ask \"{_asks(domain, question)}?\" ({question}), but the "
+                       "tree never does: check where it should")
+    for question in sorted(asked, key=lambda q: found.asks[q]):
+        if found.asks[question] < FINDING:
+            out.append(f"the tree asks \"{_asks(domain, question)}?\" ({question}), which the description does not "
+                       f"seem ({found.asks[question]:.0%}) to ask: check that branch")
+    first, p = max(found.root.items(), key=lambda kv: kv[1])
+    root = getattr(tree, "question", None) or tree.action
+    if p >= FINDING and first != root and first in found.asks:
+        out.append(f"the description seems ({p:.0%}) to ask first \"{_asks(domain, first)}?\" ({first}), but the tree "
+                   "asks something else first: check its top")
+    return out

@@ -13,9 +13,9 @@ import torch
 
 from nl2policy.domains import get_domain
 from nl2policy.language.decoding import beam_search
-from nl2policy.language.findings import FindingsModel
+from nl2policy.language.findings import Findings, FindingsModel
 from nl2policy.language.models.config import ModelConfig
-from nl2policy.language.models.network import Batch, Translator
+from nl2policy.language.models.network import Batch, Translator, build_network
 from nl2policy.language.models.pretrained import DIM as MINILM_DIM, MiniLMCache
 from nl2policy.language.text import WordVocab, split_sentences
 from nl2policy.trees import Tree
@@ -42,17 +42,13 @@ class TrainedTranslator:
     cache: MiniLMCache = field(default_factory=MiniLMCache, repr=False)
     history: list[float] = field(default_factory=list, repr=False)  # mean training loss per epoch
     beam: Optional[int] = None  # hypotheses kept while decoding (1 = greedy); None: the config's
-    mention_cost: Optional[float] = None  # decoding cost of a named action the tree lacks (see ModelConfig); None: the config's
-    question_cost: Optional[float] = None  # decoding cost of an asked question the tree lacks (see ModelConfig); None: the config's
-    rule_cost: Optional[float] = None  # decoding cost of a stated rule the tree breaks (see ModelConfig); None: the config's
-    root_cost: Optional[float] = None  # decoding cost of a root other than the stated first question; None: the config's
     findings_cost: Optional[float] = None  # weight of the learned findings in decoding (see ModelConfig); None: the config's
     findings: Optional[FindingsModel] = field(default=None, repr=False)  # the learned findings (language/findings.py)
     ensemble: Optional[int] = None  # decode with the first n networks only; None: all of them
     stack_members: bool = True  # flat encoders: decode all members as one batch (False: one by one, same result)
 
     def decoding(self, setting: str) -> float:
-        """A decoding setting (`mention_cost`, `beam`, ...): this translator's override, else its config's."""
+        """A decoding setting (`findings_cost`, `beam`, ...): this translator's override, else its config's."""
         own = getattr(self, setting)
         return getattr(self.cfg, setting) if own is None else own
 
@@ -74,7 +70,7 @@ class TrainedTranslator:
         return model
 
     def new_net(self) -> Translator:
-        return Translator(self.cfg, len(self.words), len(self.tree_tokens))
+        return build_network(self.cfg, len(self.words), len(self.tree_tokens))
 
     @property
     def tree_tokens(self) -> list[str]:
@@ -92,16 +88,24 @@ class TrainedTranslator:
         return Encoded(self.words.encode(t.text for t in flat), [len(s) for s in sentences], mini)
 
     @torch.inference_mode()
-    def predict(self, texts: Sequence[str], batch_size: int = 64) -> list[tuple[Tree, dict[int, float]]]:
-        """Grammar-constrained decoding (beam search, greedy when `beam` is 1). Returns (tree, {grid slot: probability})."""
+    def predict(self, texts: Sequence[str], batch_size: int = 64,
+                found: Optional[Sequence[Findings]] = None) -> list[tuple[Tree, dict[int, float]]]:
+        """Grammar-constrained decoding (beam search, greedy when `beam` is 1). Returns (tree, {grid slot: probability}).
+        `found`: the texts' findings if the caller has read them (`read_findings`), else read here."""
         for net in self.nets:
             if net.training:  # eval() walks every submodule: a cost per call otherwise
                 net.eval()
         out = []
         for i in range(0, len(texts), batch_size):
             chunk = list(texts[i:i + batch_size])
-            out += beam_search(self, collate([self.encode(t) for t in chunk]), chunk)
+            part = None if found is None else list(found[i:i + batch_size])
+            out += beam_search(self, collate([self.encode(t) for t in chunk]), chunk, part)
         return out
+
+    def read_findings(self, texts: Sequence[str]) -> Optional[list[Findings]]:
+        """What the texts say about their trees (findings.py), or None for a model without
+        findings: the one reading that both decoding and the warnings of `translate` use."""
+        return self.findings.read(texts) if self.findings is not None else None
 
 
 def collate(items: Sequence[Encoded]) -> Batch:

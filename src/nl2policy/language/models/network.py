@@ -1,4 +1,7 @@
-"""The encoder-decoder network shared by all translators (see models/__init__.py).
+"""The shipped translator's network: a flat BiGRU encoder over word embeddings (fused with frozen
+MiniLM layers) and a binary tree decoder (see models/__init__.py). The paper's other
+architectures (hierarchical encoder, sequential decoder) are subclasses in the lab
+(experiments/translation/baselines.py), which registers them in `ARCHITECTURES`.
 
 Training is teacher-forced over the gold pre-order tokens; each step's softmax is taken only
 over the tokens the grammar allows there, in training and decoding alike, so the model never
@@ -40,17 +43,18 @@ def _bigru_packed(gru: nn.GRU, x: torch.Tensor, lengths: torch.Tensor) -> torch.
     return out
 
 
-def _pad1(x: torch.Tensor) -> torch.Tensor:
-    """Append one zero position on axis 1, the target of padding indices."""
-    return torch.cat([x, x.new_zeros(x.shape[0], 1, *x.shape[2:])], 1)
-
-
 def _masked_mean(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     m = mask.unsqueeze(-1).float()
     return (x * m).sum(1) / m.sum(1).clamp(min=1)
 
 
 class Translator(nn.Module):
+    """Flat encoder + tree decoder. A subclass changes the encoder (`_build_encoder`, `encode`,
+    `attend`) or the decoder's inputs (`step`); `stackable` says whether the ensemble's stacked
+    encoder and decoder (same arithmetic, batched over members) may stand in for it."""
+
+    stackable = True
+
     def __init__(self, cfg: ModelConfig, n_words: int, n_tree_tokens: int) -> None:
         super().__init__()
         self.cfg = cfg
@@ -66,13 +70,7 @@ class Translator(nn.Module):
         self.drop = nn.Dropout(cfg.dropout)
         self.word_gru = nn.GRU(in_dim, h, batch_first=True, bidirectional=True)
         mem = 2 * h
-        if cfg.encoder == "han":
-            self.word_att = nn.Linear(mem, 1)
-            self.sent_gru = nn.GRU(mem, h, batch_first=True, bidirectional=True)
-            self.sent_att = nn.Linear(h, mem, bias=False)
-            ctx_dim = 2 * mem
-        else:
-            ctx_dim = mem
+        ctx_dim = self._build_encoder(mem)
         self.init = nn.Linear(mem, h)
         self.tok_emb = nn.Embedding(n_tree_tokens + 1, e)  # last id: the root's "start"
         self.branch_emb = nn.Embedding(3, e)
@@ -83,6 +81,11 @@ class Translator(nn.Module):
         self.start_id = n_tree_tokens
 
     # ---- encoder -------------------------------------------------------------------------
+    def _build_encoder(self, mem: int) -> int:
+        """Layers an encoder adds after the word BiGRU (none here); returns the attention
+        context's width."""
+        return mem
+
     def _inputs(self, b: Batch) -> torch.Tensor:
         x = self.word_emb(b.words)
         if self.cfg.minilm:
@@ -96,26 +99,7 @@ class Translator(nn.Module):
 
     def encode(self, b: Batch) -> dict:
         x = self._inputs(b)
-        mask = b.words != 0
-        if self.cfg.encoder == "flat":
-            return self.flat_memory(self.drop(self._words(x, b.lengths)), mask)
-        B, S, W = b.sent_index.shape
-        grid_index = b.sent_index.view(B, S * W, 1)
-        word_mask = torch.arange(W)[None, None] < b.sent_lengths[..., None]  # (B, S, W)
-        # one BiGRU pass per sentence, then back to the flat word axis
-        xs = torch.gather(_pad1(x), 1, grid_index.expand(-1, -1, x.shape[-1])).view(B * S, W, -1)
-        grid = _bigru_packed(self.word_gru, xs, b.sent_lengths.view(-1)).view(B, S * W, -1)
-        flat = torch.zeros(B, x.shape[1] + 1, grid.shape[-1]).scatter(1, grid_index.expand(-1, -1, grid.shape[-1]), grid)
-        states = flat[:, :-1]
-        states = self.drop(states)
-        grid = self.drop(grid).view(B, S, W, -1)
-        att = self.word_att(grid).squeeze(-1).masked_fill(~word_mask, -1e9)
-        sent_vec = (torch.softmax(att, -1).unsqueeze(-1) * grid).sum(2)
-        sent_states = self.drop(_bigru_packed(self.sent_gru, sent_vec, b.n_sents))
-        sent_mask = torch.arange(S)[None] < b.n_sents[:, None]
-        return {"words": states, "mask": mask, "grid_index": b.sent_index, "word_mask": word_mask,
-                "sents": sent_states, "sent_mask": sent_mask,
-                "h0": torch.tanh(self.init(_masked_mean(sent_states, sent_mask)))}
+        return self.flat_memory(self.drop(self._words(x, b.lengths)), b.words != 0)
 
     def flat_memory(self, states: torch.Tensor, mask: torch.Tensor) -> dict:
         """The flat encoder's memory: its word states and mask, and the decoder's start state."""
@@ -125,30 +109,15 @@ class Translator(nn.Module):
         """The attention context for decoder state h."""
         q = self.word_query(h)  # (B, mem)
         words = memory["words"]
-        score = torch.einsum("bnd,bd->bn", words, q)
-        if self.cfg.encoder == "flat":
-            att = torch.softmax(score.masked_fill(~memory["mask"], -1e9), -1)
-            return torch.einsum("bn,bnd->bd", att, words)
-        # hierarchical: P(sentence) * P(word | sentence), normalised on the (sentence, word) grid
-        B, S, W = memory["grid_index"].shape
-        s_att = torch.softmax(torch.einsum("bsd,bd->bs", memory["sents"], q).masked_fill(~memory["sent_mask"], -1e9), -1)
-        grid_score = torch.gather(_pad1(score), 1, memory["grid_index"].view(B, -1)).view(B, S, W)
-        grid_att = torch.softmax(grid_score.masked_fill(~memory["word_mask"], -1e9), -1) * s_att[..., None]
-        flat_att = torch.zeros(B, words.shape[1] + 1).scatter_add(1, memory["grid_index"].view(B, -1), grid_att.view(B, -1))
-        return torch.cat([torch.einsum("bs,bsd->bd", s_att, memory["sents"]),
-                          torch.einsum("bn,bnd->bd", flat_att[:, :-1], words)], -1)
+        att = torch.softmax(torch.einsum("bnd,bd->bn", words, q).masked_fill(~memory["mask"], -1e9), -1)
+        return torch.einsum("bn,bnd->bd", att, words)
 
     # ---- decoder -------------------------------------------------------------------------
     def step(self, memory: dict, h_prev: torch.Tensor, ctx_prev: torch.Tensor, prev_tok: torch.Tensor,
              h_parent: torch.Tensor, parent_tok: torch.Tensor, branch: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """One decoding step. Seq mode: the state runs on from the previous token only. Tree
-        mode: it also takes the parent node's token and state and which branch (yes/no) this
-        slot is, so each node is decoded knowing where in the tree it sits.
-        Returns (state, attention context, unmasked logits)."""
-        if self.cfg.decoder == "seq":
-            h_parent = torch.zeros_like(h_parent)
-            parent_tok = torch.full_like(parent_tok, self.start_id)
-            branch = torch.zeros_like(branch)
+        """One decoding step: the state takes the previous token, the parent node's token and
+        state and which branch (yes/no) this slot is, so each node is decoded knowing where in
+        the tree it sits. Returns (state, attention context, unmasked logits)."""
         inp = torch.cat([self.tok_emb(prev_tok), self.tok_emb(parent_tok), self.branch_emb(branch), h_parent, ctx_prev], -1)
         h = self.cell(self.drop(inp), h_prev)
         ctx = self.attend(memory, h)
@@ -239,7 +208,6 @@ class StackedDecoder:
 
     def __init__(self, nets: list[Translator]) -> None:
         stack = lambda get: torch.stack([get(n).detach() for n in nets])
-        self.cfg = nets[0].cfg
         self.tok_emb, self.branch_emb = stack(lambda n: n.tok_emb.weight), stack(lambda n: n.branch_emb.weight)
         self.w_ih, self.b_ih = stack(lambda n: n.cell.weight_ih).transpose(1, 2), stack(lambda n: n.cell.bias_ih)[:, None]
         self.w_hh, self.b_hh = stack(lambda n: n.cell.weight_hh).transpose(1, 2), stack(lambda n: n.cell.bias_hh)[:, None]
@@ -253,10 +221,6 @@ class StackedDecoder:
              branch: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """words (E, B, N, mem), mask (B, N), states (E, B, .), tokens (B,). Returns (h, ctx,
         logits), each (E, B, .)."""
-        if self.cfg.decoder == "seq":
-            h_parent = torch.zeros_like(h_parent)
-            parent_tok = torch.full_like(parent_tok, self.start_id)
-            branch = torch.zeros_like(branch)
         inp = torch.cat([self.tok_emb[:, prev_tok], self.tok_emb[:, parent_tok], self.branch_emb[:, branch], h_parent, ctx_prev], -1)
         gi = torch.baddbmm(self.b_ih, inp, self.w_ih).chunk(3, -1)  # GRUCell: reset, update, new
         gh = torch.baddbmm(self.b_hh, h_prev, self.w_hh).chunk(3, -1)
@@ -267,3 +231,18 @@ class StackedDecoder:
         ctx = torch.einsum("ebn,ebnd->ebd", att, words)
         hidden = torch.tanh(torch.baddbmm(self.b_out, torch.cat([h, ctx], -1), self.w_out))
         return h, ctx, torch.baddbmm(self.b_logits, hidden, self.w_logits)
+
+
+ARCHITECTURES: dict[tuple[str, str], type[Translator]] = {("flat", "tree"): Translator}
+"""(encoder, decoder) of a ModelConfig -> its network class. The product ships flat + tree; the
+lab adds the paper's other architectures (experiments/translation/baselines.py)."""
+
+
+def build_network(cfg: ModelConfig, n_words: int, n_tree_tokens: int) -> Translator:
+    """A fresh network for `cfg`; a clear error for an architecture this installation lacks."""
+    try:
+        cls = ARCHITECTURES[(cfg.encoder, cfg.decoder)]
+    except KeyError:
+        raise ValueError(f"no network for encoder {cfg.encoder!r} with decoder {cfg.decoder!r} "
+                         f"(known: {sorted(ARCHITECTURES)}; the paper's baselines are in experiments/translation)") from None
+    return cls(cfg, n_words, n_tree_tokens)
