@@ -15,9 +15,13 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the lab (experiments/) beside benchmarks/
 
 
 def main() -> None:

@@ -21,9 +21,12 @@ import atexit
 import os
 import shutil
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the lab (experiments/) beside benchmarks/
 
 
 def main() -> None:

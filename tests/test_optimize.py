@@ -9,7 +9,7 @@ from typer.testing import CliRunner
 from nl2policy.cli import app
 from nl2policy.policy.optimize import optimize_tree
 from nl2policy.policy.sb3_policy import actor_ddt, make_ppo
-from nl2policy.trees import Leaf, Node, tree_to_json
+from nl2policy.trees import Leaf, Node, parse_tree, tree_to_json
 
 TREE = Node("has_passenger", Leaf("go_airport"), Node("heavy_traffic", Leaf("go_village"), Leaf("go_city")))
 FILES = ("initial_tree.json", "last_tree.json", "best_tree.json", "final_tree.json", "curve.csv", "curve.png", "summary.json")
@@ -171,6 +171,26 @@ def test_polish_climbs_to_a_local_optimum_and_never_descends():
     around = exact.expected_returns([tree_act_fn("taxi", t) for t in neighbours("taxi", result.tree)])
     assert max(around) <= result.value + 1e-9  # no single edit improves it
     assert polish("taxi", result.tree).value == result.value
+
+
+def test_polish_escapes_the_single_edit_optimum_by_larger_moves_that_keep_the_root():
+    """The best corpus tree is a single-edit optimum (7.94); re-solving a subtree, then both
+    branches under its root question, reaches the best tree with that root (the exact search's)."""
+    from nl2policy.domains import get_domain
+    from nl2policy.policy.polish import SubtreeSearch, neighbours, polish
+    from nl2policy.policy.taxi_ceilings import best_tree
+    from nl2policy.policy.convert import tree_act_fn
+
+    d = get_domain("taxi")
+    start = parse_tree({"if": "has_passenger", "yes": {"do": "go_airport"},
+                        "no": {"if": "heavy_traffic", "yes": {"do": "go_village"}, "no": {"do": "go_city"}}}, d.vocab)
+    value = d.exact.expected_return(tree_act_fn("taxi", start))
+    assert max(d.exact.expected_returns([tree_act_fn("taxi", t) for t in neighbours("taxi", start)])) <= value + 1e-9
+    assert SubtreeSearch("taxi").best_replacement(start, value)[0] is None  # one subtree alone does not help either
+    result = polish("taxi", start)
+    assert result.tree.question == "has_passenger" and result.value > value + 0.4
+    assert result.value == pytest.approx(best_tree(d.exact.tables(), 3, roots=["has_passenger"]).value)
+    assert d.exact.expected_return(tree_act_fn("taxi", result.tree)) == result.value
 
 
 def test_polish_refuses_a_domain_without_an_exact_model(tmp_path):

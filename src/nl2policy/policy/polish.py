@@ -10,6 +10,15 @@ improves the exact expected return:
 * a leaf becomes a question with two leaves (where the path has room: depth <= 3);
 * a question node becomes a leaf.
 
+Where no single edit improves, larger moves (they need the exact model's state tables, which
+taxi has): one proper subtree (any node below the root) is replaced by the best subtree its
+position allows (depth up to the 3-question limit), the rest of the tree fixed, scored exactly
+over every such subtree at once (``SubtreeSearch.best_replacement``); and, where that is stuck
+too, both branches of the root are re-solved together under the root's own question
+(``SubtreeSearch.best_below_root``, branch and bound as ``nl2policy ceilings``). The root's
+question stays the start's unless a single edit changes it: the polish climbs from PPO's tree;
+it does not search every tree (``nl2policy ceilings`` does that, as the yardstick).
+
 Candidates are normalized (a node whose two branches came out identical is replaced by the
 branch) and kept only if the vocabulary's rules accept them (``trees.validate``). It needs
 the domain's exact model: sampled returns would climb on noise. The polish is reported beside
@@ -21,7 +30,7 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass
-from typing import Iterator
+from typing import Iterator, Optional
 
 from nl2policy.domains import get_domain
 from nl2policy.policy.convert import has_raw_tests, tree_act_fn
@@ -29,6 +38,7 @@ from nl2policy.trees import MAX_DEPTH, Leaf, Node, Tree, TreeError, tree_to_json
 from nl2policy.trees.parse import validate
 
 MAX_ROUNDS = 50  # each round strictly improves; taxi polishes stop within a handful
+MIN_GAIN = 1e-9  # a move must beat the current return by more than float noise
 
 
 @dataclass
@@ -90,16 +100,108 @@ def polish(domain: str, tree: Tree) -> Polished:
     start = time.perf_counter()
     value = start_value = float(exact.expected_return(tree_act_fn(domain, tree)))
     scored, rounds = 0, 0
+    subtrees = SubtreeSearch(domain) if hasattr(exact, "tables") else None
     while rounds < MAX_ROUNDS:
         candidates = neighbours(domain, tree)
         values = exact.expected_returns([tree_act_fn(domain, c) for c in candidates])
         scored += len(candidates)
         best = max(range(len(candidates)), key=values.__getitem__, default=None)
-        if best is None:
+        found = candidates[best] if best is not None and values[best] > value + MIN_GAIN else None
+        if found is None and subtrees is not None:  # no single edit helps: the larger moves
+            found, n = subtrees.best_replacement(tree, value)
+            scored += n
+            if found is None:
+                found, n = subtrees.best_below_root(tree, value)
+                scored += n
+        if found is None:
             break
         # confirm with the one-policy evaluator, so "better" means better by the number reported
-        confirmed = float(exact.expected_return(tree_act_fn(domain, candidates[best])))
-        if confirmed <= value:
+        confirmed = float(exact.expected_return(tree_act_fn(domain, found)))
+        if confirmed <= value + MIN_GAIN:
             break
-        tree, value, rounds = candidates[best], confirmed, rounds + 1
+        tree, value, rounds = found, confirmed, rounds + 1
     return Polished(tree, value, start_value, rounds, scored, time.perf_counter() - start)
+
+
+def _positions(tree: Tree, path: tuple[tuple[str, bool], ...] = ()) -> Iterator[tuple[tuple[tuple[str, bool], ...], Tree]]:
+    """Every node with the (question, answer) path that leads to it, the root first."""
+    yield path, tree
+    if isinstance(tree, Node):
+        yield from _positions(tree.yes, path + ((tree.question, True),))
+        yield from _positions(tree.no, path + ((tree.question, False),))
+
+
+def _replace(tree: Tree, path: tuple[tuple[str, bool], ...], new: Tree) -> Tree:
+    if not path:
+        return new
+    (_, answer), rest = path[0], path[1:]
+    if answer:
+        return Node(tree.question, _replace(tree.yes, rest, new), tree.no)
+    return Node(tree.question, tree.yes, _replace(tree.no, rest, new))
+
+
+class SubtreeSearch:
+    """The best replacement of one proper subtree, exactly: every map from the states that reach
+    the subtree's position to actions that a subtree of the allowed depth induces (one tree per
+    map, taxi_ceilings.TreeMaps), each joined with the rest of the tree's policy and scored in
+    one batch on the exact model's tables."""
+
+    def __init__(self, domain: str) -> None:
+        from nl2policy.policy.taxi_ceilings import TreeMaps
+
+        self.domain = get_domain(domain)
+        self.tables = self.domain.exact.tables()
+        self.maps = TreeMaps(self.tables, domain)
+        self.reach = tuple(self.tables.reachable())
+
+    def _policy(self, tree: Tree):
+        """The tree's effective action in every reachable state (as TreeMaps.policies lays them out)."""
+        from nl2policy.domains.taxi_tables import effective_action
+
+        index = self.domain.action_index
+        row = [effective_action(self.tables.states[s], index(tree.act(self.maps.answers[s]))) for s in self.reach]
+        return self.maps.policies(self.reach, [tuple(row)])[0]
+
+    def best_replacement(self, tree: Tree, value: float) -> tuple[Optional[Tree], int]:
+        """(the best tree one subtree replacement away if it beats `value`, else None; maps scored)."""
+        import numpy as np
+
+        from nl2policy.policy.taxi_ceilings import _returns
+
+        base, best, best_value, scored = self._policy(tree), None, value + MIN_GAIN, 0
+        for path, _ in list(_positions(tree))[1:]:
+            states = tuple(s for s in self.reach if all(self.maps.answers[s][q] == a for q, a in path))
+            if not states:
+                continue
+            options = self.maps.realizable(states, MAX_DEPTH - len(path))
+            keys = list(options)
+            policies = np.repeat(base[None], len(keys), 0)
+            policies[:, list(states)] = np.array(keys)
+            values = _returns(self.tables, policies)
+            scored += len(keys)
+            for k in np.argsort(-values):
+                if values[k] <= best_value:
+                    break
+                try:
+                    candidate = validate(_normalize(_replace(tree, path, options[keys[k]])), self.domain.vocab)
+                except TreeError:
+                    continue
+                best, best_value = candidate, float(values[k])
+                break
+        return best, scored
+
+    def best_below_root(self, tree: Tree, value: float) -> tuple[Optional[Tree], int]:
+        """(the best tree with `tree`'s root question, both branches re-solved together, if it
+        beats `value`, else None; candidate pairs scored)."""
+        from nl2policy.policy.taxi_ceilings import best_tree
+
+        if not isinstance(tree, Node):
+            return None, 0
+        found = best_tree(self.tables, MAX_DEPTH, roots=[tree.question])
+        scored = found.counts["pairs_scored"]
+        if getattr(found.tree, "question", None) != tree.question or found.value <= value + MIN_GAIN:
+            return None, scored  # (a shallower incumbent with another root is not this move)
+        try:
+            return validate(_normalize(found.tree), self.domain.vocab), scored
+        except TreeError:
+            return None, scored

@@ -42,7 +42,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Callable, Optional
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
@@ -217,8 +217,10 @@ class TreeMaps:
         return out
 
 
-def best_tree(tables: TaxiTables, depth: int = 3, progress: Progress = None) -> Ceiling:
-    """The best tree of depth <= `depth` (module doc: maps, bounds, why it is the maximum)."""
+def best_tree(tables: TaxiTables, depth: int = 3, progress: Progress = None,
+              roots: Optional[Sequence[str]] = None) -> Ceiling:
+    """The best tree of depth <= `depth` (module doc: maps, bounds, why it is the maximum);
+    with `roots`, the best whose root asks one of those questions (or is shallower)."""
     start = time.perf_counter()
     trees = TreeMaps(tables)
     reach = tuple(tables.reachable())
@@ -233,7 +235,7 @@ def best_tree(tables: TaxiTables, depth: int = 3, progress: Progress = None) -> 
               "pairs_in_space": 0, "pairs_scored": 0, "side_bounds_computed": 0}
     for question in trees.domain.questions:
         yes, no = trees.split(reach, question)
-        if not yes or not no:
+        if not yes or not no or (roots is not None and question not in roots):
             continue
         sides = []
         for side, other in ((yes, no), (no, yes)):
