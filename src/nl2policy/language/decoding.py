@@ -26,16 +26,14 @@ MAX_STEPS = 15
 
 
 def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str],
-                found: Optional[Sequence[Findings]] = None, every: bool = False) -> list:
+                found: Optional[Sequence[Findings]] = None) -> list[tuple[Tree, dict[int, float]]]:
     """Beam search under the grammar mask over the members' averaged step probabilities
     (`model.beam` hypotheses per description; 1 is greedy). A tree's score is the sum of its
     nodes' log-probabilities, so a subtree the text does not support costs its every node
     (the reported probabilities stay the model's own). With a `findings_cost`, the score also
     adds that many times the log-probability the text's findings (`found`, one per text; read
     here when not given) give the tree's question set, action set and root, paid part by part as
-    the tree takes shape, so the beam explores the trees the text was read to describe.
-    Returns (tree, node probabilities) per text, or with `every`, per text every finished
-    hypothesis as (tree, node probabilities, score), best first."""
+    the tree takes shape, so the beam explores the trees the text was read to describe."""
     vocab = get_domain(model.domain).vocab
     names = model.tree_tokens
     index = {t: i for i, t in enumerate(names)}
@@ -112,10 +110,6 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str],
     trees = [from_tokens(p, vocab) if p and next_slot(p, vocab) is None else None for p in prefixes]
     if found is not None:  # those that finished at the last step
         score = score + findings_cost * (absent.repeat_interleave(K, 0) * ~used * ~charged[:, None]).sum(-1).view(B, K)
-    if every:
-        order = score.argsort(-1, descending=True)
-        return [[(trees[b * K + int(k)], probs[b * K + int(k)], float(score[b, k])) for k in order[b]
-                 if trees[b * K + int(k)] is not None and score[b, k] > -math.inf] for b in range(B)]
     top = score.argmax(-1)  # beams stay sorted, but finished ones may have been overtaken
     return [(trees[b * K + int(k)], probs[b * K + int(k)]) for b, k in enumerate(top)]
 
