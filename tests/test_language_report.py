@@ -33,7 +33,7 @@ def test_table_one_sets_every_protocol_of_a_model_side_by_side_per_domain(tmp_pa
     highway = md.split("## highway: exact tree accuracy")[1].split("##")[0]
     assert "| seq2seq | 30.00 (0.00) [1] |" in highway and DEFAULT_MODEL not in highway
     assert "Every output is a valid tree: yes (250 translations)" in md
-    assert f"taxi {DEFAULT_MODEL} trees: 4 of 5 folds" in md
+    assert f"taxi {DEFAULT_MODEL} trees: 4 of 5 folds to go" in md
     table = json.loads((tmp_path / "table.json").read_text())
     assert {(r["domain"], r["protocol"], r["model"]): r["tree_acc"]["mean"] for r in table["rows"]}[
         ("taxi", "cv", DEFAULT_MODEL)] == 60.0

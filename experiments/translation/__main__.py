@@ -100,7 +100,7 @@ def translation_experiment(
                                  "both shifted by a model's seed_offset where it has one; "
                                  "epochs, data and beam per model in nl2policy/language/models/config.py",
                    planned=[(d, name, protocol, fold_count(protocol, repeats)) for d, name, protocol, repeats in steps])
-    console.print(md.read_text())
+    console.print(md.read_text(), markup=False, highlight=False)
 
 
 def main() -> None:

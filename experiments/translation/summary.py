@@ -195,7 +195,7 @@ def summarize(runs_files: Sequence[Path], md: Path, command: str, budget: str,
                   "Confidence = the product of the tree's node probabilities (what `translate` reports for an on-topic "
                   f"text); the app flags a translation below {LOW_CONFIDENCE}.", "", *reliable, ""]
     have = {(r["domain"], r["model"], r["protocol"]): r["folds"] for r in table}
-    missing = [f"{d} {m} {p}: {want - have.get((d, m, p), 0)} of {want} folds"
+    missing = [f"{d} {m} {p}: {want - have.get((d, m, p), 0)} of {want} folds to go"
                for d, m, p, want in planned if have.get((d, m, p), 0) < want]
     if missing:
         lines += ["**Planned but not run yet:** " + "; ".join(missing) + ".", ""]
