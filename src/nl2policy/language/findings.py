@@ -101,10 +101,11 @@ class Findings:
         taken = {leaf.action for leaf in iter_leaves(tree)}
         total = sum(math.log(max(p if q in asked else 1 - p, 1e-6)) for q, p in self.asks.items())
         total += sum(math.log(max(p if a in taken else 1 - p, 1e-6)) for a, p in self.takes.items())
-        return total + math.log(max(self.root[_root_label(tree)], 1e-6))
+        return total + math.log(max(self.root[root_label(tree)], 1e-6))
 
 
-def _root_label(tree: Tree) -> str:
+def root_label(tree: Tree) -> str:
+    """The label at a tree's root: its question, or a one-leaf tree's action."""
     return getattr(tree, "question", None) or tree.action
 
 
@@ -173,7 +174,7 @@ def train_findings(domain: str, pairs: Sequence[tuple[str, Tree]], seed: int = 0
             targets[k, index[q]] = 1.0
         for leaf in iter_leaves(tree):
             targets[k, index[leaf.action]] = 1.0
-        roots[k] = index[_root_label(tree)]
+        roots[k] = index[root_label(tree)]
     torch.manual_seed(seed)
     rng = random.Random(seed)
     net = FindingsNet(len(questions), len(actions), cfg)

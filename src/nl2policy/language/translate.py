@@ -25,7 +25,7 @@ import torch
 from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.dataset import member_pairs
-from nl2policy.language.findings import Findings, FindingsModel
+from nl2policy.language.findings import Findings, FindingsModel, root_label
 from nl2policy.language.members import default_workers, is_current
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS, ModelConfig
 from nl2policy.language.models.pretrained import MiniLMCache
@@ -252,8 +252,7 @@ def disagreements(domain: str, tree: Tree, found: Findings) -> list[str]:
             out.append(f"the tree asks \"{_asks(domain, question)}?\" ({question}), which the description does not "
                        f"seem ({found.asks[question]:.0%}) to ask: check that branch")
     first, p = max(found.root.items(), key=lambda kv: kv[1])
-    root = getattr(tree, "question", None) or tree.action
-    if p >= FINDING and first != root and first in found.asks:
+    if p >= FINDING and first != root_label(tree) and first in found.asks:
         out.append(f"the description seems ({p:.0%}) to ask first \"{_asks(domain, first)}?\" ({first}), but the tree "
                    "asks something else first: check its top")
     return out

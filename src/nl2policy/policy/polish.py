@@ -153,6 +153,7 @@ class SubtreeSearch:
         self.tables = self.domain.exact.tables()
         self.maps = TreeMaps(self.tables, domain)
         self.reach = tuple(self.tables.reachable())
+        self.below_root: dict[str, float] = {}  # root question -> the best return under it, once searched
 
     def _policy(self, tree: Tree):
         """The tree's effective action in every reachable state (as TreeMaps.policies lays them out)."""
@@ -197,7 +198,10 @@ class SubtreeSearch:
 
         if not isinstance(tree, Node):
             return None, 0
+        if self.below_root.get(tree.question, float("inf")) <= value + MIN_GAIN:
+            return None, 0  # searched under this root already, and `tree` is as good as its best
         found = best_tree(self.tables, MAX_DEPTH, roots=[tree.question])
+        self.below_root[tree.question] = found.value if getattr(found.tree, "question", None) == tree.question else value
         scored = found.counts["pairs_scored"]
         if getattr(found.tree, "question", None) != tree.question or found.value <= value + MIN_GAIN:
             return None, scored  # (a shallower incumbent with another root is not this move)
