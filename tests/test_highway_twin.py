@@ -177,7 +177,7 @@ def test_optimize_highway_on_the_twin_reports_highway_env_returns(tmp_path):
     from nl2policy.policy.optimize import optimize_tree
 
     tree = parse_tree(WEAVER, get_domain("highway").vocab)
-    summary = optimize_tree("highway", tree, steps=64, seed=0, out=tmp_path, eval_episodes=2)
+    summary = optimize_tree("highway", tree, steps=64, seed=0, out=tmp_path, eval_episodes=2, polish=False)
     assert summary["trained_on"] == "nl2policy/HighwayTwin-v0"
     assert summary["evaluated_on"] == "nl2policy/Highway-v0"
     assert summary["steps"] == 16 * 256  # one rollout of 16 twin episodes
@@ -196,7 +196,7 @@ def test_a_run_resumes_only_on_the_simulator_it_trained_on(tmp_path):
     from nl2policy.policy.optimize import OptimizeRefused, optimize_tree
 
     tree = parse_tree(WEAVER, get_domain("highway").vocab)
-    optimize_tree("highway", tree, steps=64, seed=0, out=tmp_path, eval_episodes=1)
+    optimize_tree("highway", tree, steps=64, seed=0, out=tmp_path, eval_episodes=1, polish=False)
     with pytest.raises(OptimizeRefused, match="trained on the fast simulator"):
         optimize_tree("highway", tree, steps=8192, seed=0, out=tmp_path, eval_episodes=1, simulator="reference")
 
@@ -230,3 +230,22 @@ def test_with_highway_env_seeding_a_twin_episode_is_highway_envs_episode_for_tha
         assert ours["return"][i] == pytest.approx(total, abs=1e-9)
     single = gym.make("nl2policy/HighwayTwin-v0")
     np.testing.assert_array_equal(single.reset(seed=seed)[0], env.reset(seed=seed)[0])
+
+
+def test_many_policies_in_one_batch_meet_the_scenes_each_would_meet_alone():
+    """evaluate_batched_many lays one seed's scenes out once per policy (reset option repeat):
+    each block's returns are the very returns of that policy evaluated alone."""
+    from nl2policy.policy.convert import tree_batch_act_fn
+    from nl2policy.policy.rollout import evaluate_batched, evaluate_batched_many
+
+    vocab = get_domain("highway").vocab
+    trees = [parse_tree(t, vocab) for t in (WEAVER, {"do": "idle"}, {"do": "faster"})]
+    acts = [tree_batch_act_fn("highway", t) for t in trees]
+    together = evaluate_batched_many("highway", acts, 8, 123)
+    alone = [evaluate_batched("highway", act, 8, 123) for act in acts]
+    assert [e.returns for e in together] == [e.returns for e in alone]
+    assert len({tuple(e.returns) for e in together}) == 3  # the policies do drive differently
+    with pytest.raises(ValueError, match="repeat"):
+        from nl2policy.domains.highway_twin import HighwayTwin
+
+        HighwayTwin(5).reset(np.ones(5, dtype=bool), repeat=2)

@@ -193,12 +193,35 @@ def test_polish_escapes_the_single_edit_optimum_by_larger_moves_that_keep_the_ro
     assert d.exact.expected_return(tree_act_fn("taxi", result.tree)) == result.value
 
 
-def test_polish_refuses_a_domain_without_an_exact_model(tmp_path):
-    tree = json.dumps({"do": "idle"})
-    result = runner.invoke(app, ["optimize", "--domain", "highway", "--tree", tree, "--steps", "4096", "--polish",
-                                 "--out", str(tmp_path)])
-    assert result.exit_code == 2
-    assert result.output.strip().splitlines()[-1] == "error: --polish needs an exact model; highway has none"
+def test_sampled_polish_climbs_on_common_scenes_and_keeps_a_start_it_cannot_beat():
+    """highway has no exact model: its polish screens neighbours on shared twin scenes and moves
+    only on a paired gain of CONFIRM_Z standard errors, so the returned tree is never worse on
+    the confirmation scenes, scored afresh."""
+    import numpy as np
+
+    from nl2policy.policy.convert import RAW_PREFIX, tree_batch_act_fn
+    from nl2policy.policy.keep_best import SELECT_SEED
+    from nl2policy.policy.polish import CONFIRM_Z, can_polish, polish_sampled
+    from nl2policy.domains import get_domain
+    from nl2policy.policy.rollout import evaluate_batched
+
+    assert can_polish("highway") and can_polish("taxi")
+    vocab = get_domain("highway").vocab
+
+    def returns(tree):
+        return np.asarray(evaluate_batched("highway", tree_batch_act_fn("highway", tree), 48, SELECT_SEED).returns)
+
+    poor = parse_tree({"do": "lane_left"}, vocab)  # hugs the left edge at its start speed
+    result = polish_sampled("highway", poor, screen_episodes=6, confirm_episodes=48)
+    assert result.rounds >= 1 and result.tree != poor
+    gain = returns(result.tree) - returns(poor)
+    assert result.value == pytest.approx(returns(result.tree).mean())
+    assert gain.mean() > CONFIRM_Z * gain.std(ddof=1) / np.sqrt(len(gain)) > 0
+    again = polish_sampled("highway", result.tree, screen_episodes=6, confirm_episodes=48)
+    assert again.tree == result.tree and again.rounds == 0  # where it stopped, no neighbour confirms a gain
+    raw = Node(f"{RAW_PREFIX}gap_ahead>0.1000", Leaf("idle"), Leaf("slower"))
+    with pytest.raises(ValueError, match="raw threshold"):
+        polish_sampled("highway", raw, screen_episodes=6, confirm_episodes=48)
 
 
 def test_a_checkpoint_from_before_keep_best_resumes(tmp_path):

@@ -315,14 +315,24 @@ class HighwayTwin:
                     deltas[row, car - 1] = rng.uniform(*IDM.DELTA_RANGE)
         return lanes, speeds, gap_factor, deltas
 
-    def reset(self, mask: np.ndarray) -> None:
-        """New scenes for the episodes in `mask` (Vehicle.create_random, car after car)."""
+    def reset(self, mask: np.ndarray, repeat: int = 1) -> None:
+        """New scenes for the episodes in `mask` (Vehicle.create_random, car after car).
+
+        `repeat` > 1 (with every episode in `mask`): draw num_envs / repeat scenes, exactly as an
+        env of that many episodes would from the same seed, and lay them out `repeat` times, block
+        after block. The steps draw no random numbers, so block j replays block 0's episodes for
+        whatever acts there: many policies meet the same traffic in one batch."""
         idx = np.flatnonzero(mask)
         k, c = len(idx), self.config
         if k == 0:
             return
-        lanes, other_speeds, gap_factor, deltas = (self._draw_highway_env(idx) if self.seeding == "highway-env"
-                                                   else self._draw_batch(k))
+        if repeat > 1 and (k != self.num_envs or k % repeat):
+            raise ValueError(f"repeat={repeat} needs every one of the {self.num_envs} episodes reset, a multiple of it")
+        drawn = idx[: k // repeat]
+        lanes, other_speeds, gap_factor, deltas = (self._draw_highway_env(drawn) if self.seeding == "highway-env"
+                                                   else self._draw_batch(len(drawn)))
+        if repeat > 1:
+            lanes, other_speeds, gap_factor, deltas = (np.tile(a, (repeat, 1)) for a in (lanes, other_speeds, gap_factor, deltas))
         speeds = np.concatenate([np.full((k, 1), EGO_SPEED), other_speeds], axis=1)
         spacing = np.concatenate([np.full((k, 1), c.ego_spacing), np.full((k, self.v - 1), 1 / c.density)], axis=1)
         offsets = spacing * (12 + speeds) * np.exp(-5 / 40 * c.lanes)

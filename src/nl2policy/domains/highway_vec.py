@@ -85,9 +85,11 @@ class HighwayTwinVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        """`options={"repeat": k}`: num_envs / k scenes, each k times, block after block
+        (``HighwayTwin.reset``): k policies scored on common scenes in one batch."""
         if seed is not None:
             self.twin.seed(seed)
-        self.twin.reset(np.ones(self.num_envs, dtype=bool))
+        self.twin.reset(np.ones(self.num_envs, dtype=bool), repeat=int((options or {}).get("repeat", 1)))
         return self.twin.features(), {}
 
     def step(self, actions):

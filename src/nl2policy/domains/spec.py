@@ -61,6 +61,7 @@ class Knobs:
     fidelity_gammas: tuple[float, ...]  # other sharpnesses in the fidelity report's sensitivity rows
     train_envs: int = 1  # episodes side by side when training on the domain's fast vector env
     select_episodes: Optional[int] = None  # fast-env episodes for keep-best's sampled score of a tree
+    polish_screen_episodes: Optional[int] = None  # fast-env episodes a sampled polish screens each neighbour on
 
 
 Act = Callable[[np.ndarray], int]

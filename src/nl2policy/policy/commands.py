@@ -24,7 +24,7 @@ def optimize(
     seed: int = typer.Option(0),
     out: Path = typer.Option(Path("runs/optimize"), help="Output folder; holding a checkpoint, the run resumes"),
     eval_episodes: Optional[int] = typer.Option(None, min=1, help="Episodes for the before/after returns (default: the domain's eval_episodes, domains/<name>.toml)"),
-    polish: Optional[bool] = typer.Option(None, "--polish/--no-polish", help="Hill-climb the kept tree on the exact model (default: on where the domain has one, taxi)"),
+    polish: Optional[bool] = typer.Option(None, "--polish/--no-polish", help="Hill-climb the kept tree over questions and actions: on the exact model (taxi), or on common sampled scenes of the fast simulator (highway); default on where the domain has either"),
     simulator: str = typer.Option("fast", help="Train on the domain's fast simulator (highway: the vectorized twin) or on its reference env (highway-env); returns are always the reference env's"),
 ) -> None:
     """Improve a tree with PPO (tree -> DDT -> PPO -> tree), never returning a worse tree; writes trees, curve and summary.json."""

@@ -6,8 +6,8 @@ again with the same ``out`` folder loads the checkpoint and continues from the s
 
 What ``optimize_tree`` returns (``final_tree.json``) is never worse than the tree it was
 given: the best of the initial tree and every checkpoint's discretized tree (``keep_best``),
-then, with an exact model and ``polish``, a hill climb over questions and actions from it
-(``polish``). PPO's own last tree (``last_tree.json``), the kept tree (``best_tree.json``) and
+then, with ``polish``, a hill climb over questions and actions from it (``polish``: on the
+exact model where the domain has one, else on common sampled scenes of its fast simulator). PPO's own last tree (``last_tree.json``), the kept tree (``best_tree.json``) and
 the polished one (``polished_tree.json``) are written and scored beside it, so the paper's
 DDT + PPO and each added step are reported separately.
 """
@@ -196,10 +196,12 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
     domain has an exact model) the polish; writes initial_tree.json, last_tree.json,
     best_tree.json, [polished_tree.json,] final_tree.json (what is returned), curve.csv,
     curve.png and summary.json into `out` and returns the summary (see module doc)."""
+    from nl2policy.policy.polish import can_polish, polish_any
+
     d = get_domain(domain)
-    polish = d.exact is not None if polish is None else polish
-    if polish and d.exact is None:
-        raise OptimizeRefused(f"--polish needs an exact model; {domain} has none")
+    polish = can_polish(domain) if polish is None else polish
+    if polish and not can_polish(domain):
+        raise OptimizeRefused(f"--polish needs an exact model or a fast simulator with polish knobs; {domain} has neither")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tree_path = out / "initial_tree.json"
@@ -220,9 +222,7 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
     final_tree, returned = kept, f"kept {kept_from}"
     polished = None
     if polish and not has_raw_tests(kept):
-        from nl2policy.policy.polish import polish as hill_climb
-
-        polished = hill_climb(domain, kept)
+        polished = polish_any(domain, kept)
         (out / "polished_tree.json").write_text(json.dumps(tree_to_json(polished.tree), indent=2))
         if polished.value > kept_score:
             final_tree, returned = polished.tree, "polished"

@@ -20,9 +20,16 @@ question stays the start's unless a single edit changes it: the polish climbs fr
 it does not search every tree (``nl2policy ceilings`` does that, as the yardstick).
 
 Candidates are normalized (a node whose two branches came out identical is replaced by the
-branch) and kept only if the vocabulary's rules accept them (``trees.validate``). It needs
-the domain's exact model: sampled returns would climb on noise. The polish is reported beside
-PPO's tree, never instead of it (``optimize_tree`` writes both).
+branch) and kept only if the vocabulary's rules accept them (``trees.validate``). The polish is
+reported beside PPO's tree, never instead of it (``optimize_tree`` writes both).
+
+A domain without an exact model but with a fast vector env (highway's twin) gets
+``polish_sampled``: the same single edits, scored on sampled episodes, where a climb on noise is
+the danger. Every candidate meets the same scenes (common random numbers); a round screens all
+neighbours on the knobs' ``polish_screen_episodes`` (seed ``POLISH_SEED``), then confirms the
+best few on keep-best's ``select_episodes`` (seed ``SELECT_SEED``), and moves only where the
+per-episode gain over the incumbent is ``CONFIRM_Z`` paired standard errors above zero. Neither
+seed is ``optimize``'s reporting seed, so a reported gain is not the selection's own noise.
 """
 
 from __future__ import annotations
@@ -30,6 +37,7 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Iterator, Optional
 
 from nl2policy.domains import get_domain
@@ -39,6 +47,9 @@ from nl2policy.trees.parse import validate
 
 MAX_ROUNDS = 50  # each round strictly improves; taxi polishes stop within a handful
 MIN_GAIN = 1e-9  # a move must beat the current return by more than float noise
+POLISH_SEED = 70_000  # the sampled polish's screening scenes: apart from EVAL_SEED and SELECT_SEED
+CONFIRM_Z = 2.0  # a sampled move's paired gain must be this many standard errors above zero
+CONFIRM_BEST = 3  # screened candidates confirmed per round, best first
 
 
 @dataclass
@@ -209,3 +220,67 @@ class SubtreeSearch:
             return validate(_normalize(found.tree), self.domain.vocab), scored
         except TreeError:
             return None, scored
+
+
+@lru_cache(maxsize=32)
+def polish_sampled(domain: str, tree: Tree, screen_episodes: Optional[int] = None,
+                   confirm_episodes: Optional[int] = None) -> Polished:
+    """Best-improvement hill climbing from `tree` on the domain's fast vector env, without an
+    exact model (module doc). ``value`` and ``start_value`` are mean returns over the
+    ``select_episodes`` confirmation episodes; the start is kept unless a neighbour beats it by
+    ``CONFIRM_Z`` paired standard errors there. Its scenes are fixed, so the result is a function
+    of the tree: cached per process (another seed of the same start often keeps the same tree),
+    with the first call's seconds. The episode counts default to the knobs'."""
+    import numpy as np
+
+    from nl2policy.policy.convert import tree_batch_act_fn
+    from nl2policy.policy.keep_best import SELECT_SEED
+    from nl2policy.policy.rollout import evaluate_batched, evaluate_batched_many
+
+    d = get_domain(domain)
+    screen_n = screen_episodes or d.knobs.polish_screen_episodes
+    confirm_n = confirm_episodes or d.knobs.select_episodes
+    if d.train_env_id is None or not screen_n or not confirm_n:
+        raise ValueError(f"a sampled polish needs a fast vector env and the knobs polish_screen_episodes and "
+                         f"select_episodes; {domain} has not")
+    if has_raw_tests(tree):
+        raise ValueError("the tree has raw threshold tests; the polish edits vocabulary trees only")
+    start = time.perf_counter()
+
+    def returns(t: Tree, n: int, seed: int) -> np.ndarray:
+        return np.asarray(evaluate_batched(domain, tree_batch_act_fn(domain, t), n, seed).returns)
+
+    incumbent = returns(tree, confirm_n, SELECT_SEED)
+    start_value, scored, rounds = float(incumbent.mean()), 0, 0
+    while rounds < MAX_ROUNDS:
+        candidates = neighbours(domain, tree)
+        screened = evaluate_batched_many(domain, [tree_batch_act_fn(domain, t) for t in [tree] + candidates],
+                                         screen_n, POLISH_SEED)
+        base = np.asarray(screened[0].returns)
+        gains = [float((np.asarray(e.returns) - base).mean()) for e in screened[1:]]
+        scored += len(candidates)
+        found = None
+        for k in sorted(range(len(candidates)), key=lambda i: -gains[i])[:CONFIRM_BEST]:
+            if gains[k] <= MIN_GAIN:
+                break
+            confirmed = returns(candidates[k], confirm_n, SELECT_SEED)
+            diff = confirmed - incumbent
+            if diff.mean() > CONFIRM_Z * diff.std(ddof=1) / np.sqrt(len(diff)):
+                found = (candidates[k], confirmed)
+                break
+        if found is None:
+            break
+        (tree, incumbent), rounds = found, rounds + 1
+    return Polished(tree, float(incumbent.mean()), start_value, rounds, scored, time.perf_counter() - start)
+
+
+def can_polish(domain: str) -> bool:
+    """Whether `domain` has a polish: its exact model's, or the sampled one on its fast env."""
+    d = get_domain(domain)
+    return d.exact is not None or (d.train_env_id is not None and bool(d.knobs.polish_screen_episodes)
+                                   and bool(d.knobs.select_episodes))
+
+
+def polish_any(domain: str, tree: Tree) -> Polished:
+    """The domain's polish: exact where it has an exact model, else sampled."""
+    return polish(domain, tree) if get_domain(domain).exact is not None else polish_sampled(domain, tree)
