@@ -25,10 +25,9 @@ from __future__ import annotations
 
 import json
 import math
-import multiprocessing
 import platform
+import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Callable, Optional
@@ -44,6 +43,7 @@ from nl2policy.domains import get_domain
 from nl2policy.domains.highway import META_ACTION, HighwayFeatures
 from nl2policy.domains.highway_twin import HighwayTwin, copy_scene_from, copy_scene_to
 from nl2policy.domains.highway_vec import twin_episodes
+from nl2policy.grid import Job, normalize_ray_flag, ray_failure, ray_option_help, run_jobs
 from nl2policy.trees import parse_tree, tree_to_json
 
 SCREEN_SEED = 900_000  # screening episodes: far from the evaluation seeds
@@ -275,6 +275,7 @@ def main(
     seed: int = typer.Option(0, min=0, help="first highway-env seed; the twin's seed"),
     workers: int = typer.Option(2, min=1, help="highway-env worker processes"),
     chunk: int = typer.Option(25, min=1, help="highway-env episodes a job"),
+    ray: Optional[str] = typer.Option(None, "--ray", help=ray_option_help()),
 ) -> None:
     """Fidelity of the highway twin against highway-env (resumable; see the module docstring)."""
     try:
@@ -299,20 +300,27 @@ def main(
     todo = [j for j in jobs if (j[0], j[1], j[2]) not in done]
     console.print(f"{len(policies)} policies; {len(jobs) - len(todo)} of {len(jobs)} highway-env jobs done before")
     started = time.perf_counter()
-    context = multiprocessing.get_context("fork")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool, Progress(console=console) as bar:
-        task = bar.add_task("highway-env episodes", total=sum(j[3] for j in todo))
-        futures = {}
-        for kind, p, first, count in todo:
-            fn = {"unpaired": highway_env_chunk, "paired": paired_chunk, "replay": replay_chunk}[kind]
-            run_seed = PAIRED_SEED + seed if kind == "paired" else seed
-            futures[pool.submit(fn, p, policies[p], first, count, run_seed)] = count
-        for future in as_completed(futures):
-            result = {**future.result(), "command": command}
+    fns = {"unpaired": highway_env_chunk, "paired": paired_chunk, "replay": replay_chunk}
+    grid = [Job(f"{kind} {p} {first}", fns[kind], {"policy": p, "tree": policies[p], "first": first, "count": count,
+                                                   "seed": PAIRED_SEED + seed if kind == "paired" else seed})
+            for kind, p, first, count in todo]
+    with Progress(console=console) as bar:
+        task = bar.add_task("highway-env episodes" + (f" on Ray ({ray})" if ray else ""), total=sum(j[3] for j in todo))
+
+        def record(job: Job, chunk_result: dict) -> None:
+            result = {**chunk_result, "command": command}
             with log.open("a") as handle:
                 handle.write(json.dumps(result) + "\n")
             runs.append(result)
-            bar.advance(task, futures[future])
+            bar.advance(task, job.kwargs["count"])
+
+        try:
+            run_jobs(grid, record, ray=ray, processes=workers)
+        except Exception as exc:  # Ray's own failures are one line, not a traceback
+            reason = ray_failure(exc)
+            if reason is None:
+                raise
+            raise SystemExit(f"error: {reason}") from None
     twin = [twin_episodes(batch_policy(tree, seed), episodes, seed) for tree in policies]
     meta = {"command": command, "made": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "highway_env_episodes": episodes, "paired_episodes": paired_episodes, "seed": seed,
@@ -323,4 +331,6 @@ def main(
 
 
 if __name__ == "__main__":
-    typer.run(main)
+    cli = typer.Typer(add_completion=False)
+    cli.command()(main)
+    cli(args=normalize_ray_flag(sys.argv[1:]))

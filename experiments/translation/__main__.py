@@ -8,6 +8,7 @@ A lab harness, outside the product: it imports the package, the package never im
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Optional
 
@@ -16,6 +17,7 @@ import typer
 from experiments.translation.evaluate import fold_count, run_experiment
 from experiments.translation.summary import summarize
 from nl2policy.console import console, domain_or_fail, err
+from nl2policy.grid import normalize_ray_flag, ray_failure, ray_option_help
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
 
 
@@ -74,6 +76,7 @@ def translation_experiment(
     networks_from: Optional[Path] = typer.Option(None, help="A --keep-networks folder: a fold whose networks are there "
                                                            "(same fold, a model that trains the same networks) decodes "
                                                            "them instead of training"),
+    ray: Optional[str] = typer.Option(None, "--ray", help=ray_option_help()),
 ) -> None:
     """Every translator's accuracy under each protocol (resumable): Table 1."""
     import torch
@@ -92,8 +95,15 @@ def translation_experiment(
         err.print(f"[red]error:[/red] no folds to summarise: {out / 'runs.jsonl'} does not exist (run without --summarize-only first)")
         raise typer.Exit(2)
     if not summarize_only:
-        run_experiment(steps, out, progress=lambda msg: err.print(f"fold: {msg}", highlight=False), workers=workers,
-                       keep_networks=keep_networks, networks_from=networks_from)
+        try:
+            run_experiment(steps, out, progress=lambda msg: err.print(f"fold: {msg}", highlight=False), workers=workers,
+                           keep_networks=keep_networks, networks_from=networks_from, ray=ray)
+        except Exception as exc:  # Ray's own failures (an address, a dead cluster) are one line, not a traceback
+            reason = ray_failure(exc)
+            if reason is None:
+                raise
+            err.print(f"[red]error:[/red] {reason}")
+            raise typer.Exit(2)
     md = summarize([out / "runs.jsonl"], out / "translation.md", command, "one CPU thread per training process (with --workers N, an ensemble's members train in N such "
                                  "processes: the same networks, less wall time); model seed = CV repeat index (ensemble member m: + m); "
                                  "augmentation/synthetic seed 0 (with member_draws, member m: seed m); "
@@ -104,7 +114,9 @@ def translation_experiment(
 
 
 def main() -> None:
-    typer.run(translation_experiment)
+    app = typer.Typer(add_completion=False)
+    app.command()(translation_experiment)
+    app(args=normalize_ray_flag(sys.argv[1:]))
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ from typing import Callable, Optional, Sequence
 import torch
 
 from nl2policy.domains import get_domain
+from nl2policy.grid import Job, run_jobs
 from nl2policy.language.corpus import Spec, kfold, load_corpus, new_writer_folds
 from nl2policy.language.dataset import member_pairs
 from nl2policy.language.models.config import MODELS, networks_config
@@ -162,38 +163,61 @@ def plan_folds(specs: Sequence[Spec], protocol: str, repeats: int) -> list[tuple
     return [(f"writers-f{f}", tr, te) for f, (tr, te) in enumerate(kfold(specs, 4, seed=0, by_writer=True))]
 
 
+_CACHES: dict[str, MiniLMCache] = {}
+"""MiniLM states per domain, kept by the process across the folds it runs (a cache: same results)."""
+
+
+def fold_job(domain: str, name: str, protocol: str, repeats: int, key: str, workers: int = 1,
+             keep_networks: Optional[Path] = None, networks_from: Optional[Path] = None) -> dict:
+    """One fold of the grid, from its coordinates alone (the fold's indices are recomputed), so
+    that any process, here or a Ray worker, gives the same result: run_fold plus the fold's record."""
+    torch.set_num_threads(1)
+    specs = load_corpus(domain, rounds=PROTOCOL_ROUNDS[protocol])
+    tr, te = next((tr, te) for k, tr, te in plan_folds(specs, protocol, repeats) if k == key)
+    seed = int(key.split("-r")[1][0]) if "-r" in key else 0
+    keep = keep_networks / f"{domain}-{name}-{key}.pt" if keep_networks else None
+    reuse = kept_networks(networks_from, domain, name, key, tr, te) if networks_from else None
+    cache = _CACHES.setdefault(domain, MiniLMCache())
+    result = run_fold(domain, specs, tr, te, name, seed, cache, workers, keep, reuse)
+    result.update(domain=domain, model=name, fold=key, protocol=protocol, workers=workers,
+                  machine=reuse["machine"] if reuse else machine())
+    if reuse:
+        result["networks_from"] = reuse["name"]
+    return result
+
+
 def run_experiment(plan: Sequence[tuple[str, str, str, int]], out: Path,
                    progress: Optional[Callable[[str], None]] = None, workers: int = 1,
-                   keep_networks: Optional[Path] = None, networks_from: Optional[Path] = None) -> Path:
+                   keep_networks: Optional[Path] = None, networks_from: Optional[Path] = None,
+                   ray: Optional[str] = None) -> Path:
     """`plan`: (domain, model, protocol, repeats). Appends each fold to out/runs.jsonl.
     `workers`: processes training an ensemble's members side by side (train.fit); the folds'
     results are the same as with one, only the recorded seconds change. `keep_networks`: a folder
     to save each fold's networks in (DOMAIN-MODEL-FOLD.pt); `networks_from`: such a folder, whose
-    networks a fold decodes instead of training where they fit it (kept_networks)."""
+    networks a fold decodes instead of training where they fit it (kept_networks). `ray`: run
+    each fold as a Ray task of `workers` CPUs (nl2policy.grid); the lines are the same, in the
+    order the folds finish."""
     torch.set_num_threads(1)
     out.mkdir(parents=True, exist_ok=True)
     runs = out / "runs.jsonl"
     done = {(r["domain"], r["model"], r["fold"]) for r in read_runs(runs)}
-    caches: dict[str, MiniLMCache] = {}
+    jobs = []
     for domain, name, protocol, repeats in plan:
         specs = load_corpus(domain, rounds=PROTOCOL_ROUNDS[protocol])
-        cache = caches.setdefault(domain, MiniLMCache())
-        for key, tr, te in plan_folds(specs, protocol, repeats):
+        for key, _, _ in plan_folds(specs, protocol, repeats):
             if (domain, name, key) in done:
                 continue
-            if progress:
-                progress(f"{domain} {name} {key}")
-            seed = int(key.split("-r")[1][0]) if "-r" in key else 0
-            keep = keep_networks / f"{domain}-{name}-{key}.pt" if keep_networks else None
-            reuse = kept_networks(networks_from, domain, name, key, tr, te) if networks_from else None
-            result = run_fold(domain, specs, tr, te, name, seed, cache, workers, keep, reuse)
-            result.update(domain=domain, model=name, fold=key, protocol=protocol, workers=workers,
-                          machine=reuse["machine"] if reuse else machine())
-            if reuse:
-                result["networks_from"] = reuse["name"]
-            with runs.open("a") as fh:
-                fh.write(json.dumps(result) + "\n")
             done.add((domain, name, key))  # a later plan step (e.g. cv3 after cv1) must not redo it
+            jobs.append(Job(f"{domain} {name} {key}", fold_job,
+                            {"domain": domain, "name": name, "protocol": protocol, "repeats": repeats, "key": key,
+                             "workers": workers, "keep_networks": keep_networks, "networks_from": networks_from},
+                            cpus=workers))
+
+    def record(job: Job, result: dict) -> None:
+        with runs.open("a") as fh:
+            fh.write(json.dumps(result) + "\n")
+
+    run_jobs(jobs, record, ray=ray, on_start=(lambda job: progress(job.name)) if progress else None)
     return runs
 
 

@@ -118,7 +118,9 @@ def main() -> None:  # pragma: no cover - console entry
     from nl2policy import console as terminal
 
     terminal.owns_process = True
-    app()
+    from nl2policy.grid import normalize_ray_flag
+
+    app(args=normalize_ray_flag(sys.argv[1:]))
 
 
 if __name__ == "__main__":  # pragma: no cover

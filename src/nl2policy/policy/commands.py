@@ -8,6 +8,8 @@ from typing import Optional
 
 import typer
 
+from nl2policy.grid import ray_option_help
+
 
 def register(app: typer.Typer) -> None:
     app.command("optimize")(optimize)
@@ -69,11 +71,13 @@ def policy_experiment(
     tree_seeds: int = typer.Option(2, min=1),
     baseline_seeds: int = typer.Option(3, min=1),
     out: Path = typer.Option(Path("results/policy")),
+    ray: Optional[str] = typer.Option(None, "--ray", help=ray_option_help()),
 ) -> None:
     """Table 2: tree-initialized DDT vs random DDT vs MLP (resumable; finished runs are skipped)."""
     import torch
 
-    from nl2policy.console import console, domain_or_fail, progress_bar
+    from nl2policy.console import console, domain_or_fail, fail, progress_bar
+    from nl2policy.grid import Job, ray_failure, run_jobs
     from nl2policy.policy.experiment import plan, run_one, select_trees, summarize
     from nl2policy.policy.experiment_report import write_figure, write_table
 
@@ -84,25 +88,43 @@ def policy_experiment(
     root = out / domain
     selected = select_trees(domain, candidates, best, select_episodes, 0, root)
     runs = plan(selected, tree_seeds, baseline_seeds)
-    results = []
+    jobs = [Job(name, run_one, {"domain": domain, "method": method, "seed": seed, "steps": steps,
+                                "run_dir": root / "runs" / name, "tree_json": tree_json})
+            for name, method, seed, tree_json in runs]
+    finished: dict[str, dict] = {}
     with progress_bar() as bar:
-        overall = bar.add_task(f"{domain}: runs", total=len(runs))
-        for i, (name, method, seed, tree_json) in enumerate(runs):
-            task = bar.add_task(name, total=steps)
-            result = run_one(domain, method, seed, steps, root / "runs" / name, tree_json,
-                             progress=lambda n, total, t=task: bar.update(t, completed=n))
-            if method == "tree_ddt":
-                result["tree_rank"] = int(name.split("_t")[1].split("_")[0])
-            results.append(result)
-            bar.remove_task(task)
-            bar.update(overall, completed=i + 1)
-            # rewrite the table after every run, so a grid cut short still reports what finished
+        overall = bar.add_task(f"{domain}: runs" + (f" on Ray ({ray})" if ray else ""), total=len(runs))
+        steps_bar: dict[str, int] = {}
+
+        def started(job: Job) -> None:
+            if ray is None:  # in this process: a bar of the run's steps
+                steps_bar[job.name] = bar.add_task(job.name, total=steps)
+                job.kwargs["progress"] = lambda n, total, t=steps_bar[job.name]: bar.update(t, completed=n)
+
+        def record(job: Job, result: dict) -> None:
+            if job.name in steps_bar:
+                bar.remove_task(steps_bar.pop(job.name))
+            if job.kwargs["method"] == "tree_ddt":
+                result["tree_rank"] = int(job.name.split("_t")[1].split("_")[0])
+            finished[job.name] = result
+            bar.update(overall, completed=len(finished))
+            # rewrite the table after every run, in the plan's order, so a grid cut short still
+            # reports what finished and Ray's order of completion changes nothing
+            results = [finished[j.name] for j in jobs if j.name in finished]
             settings = {"steps_per_run": steps, "candidates": candidates, "best": best, "select_episodes": select_episodes,
                         "tree_seeds": list(range(tree_seeds)), "baseline_seeds": list(range(baseline_seeds)),
                         "finished_runs": f"{len(results)} of {len(runs)}"}
-            md = write_table(domain, summarize(results, domain), results, settings, out, command)
+            write_table(domain, summarize(results, domain), results, settings, out, command)
             write_figure(domain, results, out)
-    console.print(md.read_text())
+
+        try:
+            run_jobs(jobs, record, ray=ray, on_start=started)
+        except Exception as exc:  # Ray's own failures are the user's to fix (an address, a dead cluster)
+            reason = ray_failure(exc)
+            if reason is None:
+                raise
+            fail(reason)
+    console.print((out / f"table2_{domain}.md").read_text())
 
 
 def policy_fidelity(
