@@ -36,6 +36,18 @@ def test_ray_flag_without_a_value_means_a_local_ray_and_jobs_run_the_same_everyw
     assert ray_failure(ValueError("mine")) is None  # a bug of ours is not dressed up as Ray's
 
 
+def test_an_unreachable_cluster_address_is_one_clear_line_at_once(tmp_path):
+    from nl2policy.cli import app
+
+    started = time.time()
+    result = runner.invoke(app, ["policy-experiment", "--domain", "taxi", "--steps", "512", "--candidates", "2",
+                                 "--best", "1", "--select-episodes", "1", "--tree-seeds", "1", "--baseline-seeds", "1",
+                                 "--out", str(tmp_path), "--ray", "127.0.0.1:1"])
+    assert result.exit_code == 2 and time.time() - started < 60
+    last = result.output.strip().splitlines()[-1]
+    assert last.startswith("error: the Ray grid stopped: ConnectionError: cannot reach a Ray cluster at 127.0.0.1:1")
+
+
 def _without_timing(result: dict) -> dict:
     return {k: v for k, v in result.items() if k not in ("seconds", "workers")}
 

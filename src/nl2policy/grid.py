@@ -50,6 +50,20 @@ def normalize_ray_flag(argv: list[str]) -> list[str]:
     return out
 
 
+def _check_reachable(address: str, timeout: float = 5.0) -> None:
+    """Fail at once on a cluster address nothing answers at: ray.init would retry for minutes,
+    printing its own C++ warnings, before giving up."""
+    import socket
+
+    host, _, port = address.split("://")[-1].rpartition(":")
+    if not host or not port.isdigit():
+        return  # not host:port (e.g. "auto"): Ray resolves it itself
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise ConnectionError(f"cannot reach a Ray cluster at {address}: {exc.strerror or exc}") from None
+
+
 def _start_ray(address: str, cpus: Optional[int]) -> None:
     import ray
 
@@ -58,6 +72,8 @@ def _start_ray(address: str, cpus: Optional[int]) -> None:
     # workers import the project as the driver does: the package (installed) and the lab (repo root)
     path = os.pathsep.join(p for p in (str(REPO_ROOT), os.environ.get("PYTHONPATH", "")) if p)
     runtime_env = {"env_vars": {"PYTHONPATH": path, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}}
+    if address != LOCAL:
+        _check_reachable(address)
     if address == LOCAL:
         ray.init(num_cpus=cpus or os.cpu_count() or 1, include_dashboard=False, log_to_driver=False,
                  runtime_env=runtime_env, logging_level="ERROR", configure_logging=True)
