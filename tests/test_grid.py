@@ -49,7 +49,7 @@ def test_an_unreachable_cluster_address_is_one_clear_line_at_once(tmp_path):
 
 
 def _without_timing(result: dict) -> dict:
-    return {k: v for k, v in result.items() if k not in ("seconds", "workers")}
+    return {k: v for k, v in result.items() if k not in ("seconds", "workers", "polish_seconds")}
 
 
 def test_policy_experiment_on_ray_writes_what_the_local_runner_writes(tmp_path):

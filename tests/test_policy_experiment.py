@@ -6,6 +6,7 @@ import numpy as np
 from typer.testing import CliRunner
 
 from nl2policy.cli import app
+from nl2policy.policy.experiment import _reach, steps_to
 from nl2policy.policy.optimize import rolling_mean
 
 runner = CliRunner()
@@ -13,6 +14,13 @@ runner = CliRunner()
 
 def test_rolling_mean_uses_the_last_window_episodes():
     assert np.allclose(rolling_mean([1, 2, 3, 4], 2), [1, 1.5, 2.5, 3.5])
+
+
+def test_steps_to_a_level_and_the_median_over_runs_that_never_reach_it():
+    assert steps_to([(0, 1.0), (10, 2.0), (20, 3.0)], 2.0) == 10
+    assert steps_to([(0, 1.0)], 2.0) is None
+    assert _reach([10, 30, None])["median"] == 30  # a run that never reached counts as slowest
+    assert _reach([10, None, None]) == {"median": None, "reached": 1, "runs": 3, "values": [10, None, None]}
 
 
 def test_tiny_experiment_writes_table_and_skips_finished_runs(tmp_path):
@@ -24,10 +32,44 @@ def test_tiny_experiment_writes_table_and_skips_finished_runs(tmp_path):
     assert {r["method"] for r in table["runs"]} == {"tree_ddt", "random_ddt", "mlp"}
     assert (tmp_path / "curves_taxi.png").is_file() and "--steps 512" in (tmp_path / "table2_taxi.md").read_text()
     selected = json.loads((tmp_path / "taxi" / "selected_trees.json").read_text())
-    returns = [c["mean_return"] for c in selected["candidates"]]
+    returns = [c["exact_return"] for c in selected["candidates"]]  # taxi ranks by the exact return
     assert returns == sorted(returns, reverse=True) and selected["selected"] == selected["candidates"][:1]
+    runs = {r["method"]: r for r in table["runs"]}
+    ceiling = table["ceiling"]["value"]
+    assert abs(ceiling - 8.386) < 1e-3  # the best stationary feature policy (results/policy/ceilings_taxi.md)
+    tree_run = runs["tree_ddt"]
+    # the probe at step 0 scores the start tree itself (the fresh DDT discretizes back to it)
+    assert tree_run["probes"][0] == {"step": 0, **tree_run["probes"][0]}
+    assert abs(tree_run["probes"][0]["policy"] - tree_run["initial_tree_score"]) < 1e-9
+    assert tree_run["initial_tree_score"] <= tree_run["kept_score"] <= tree_run["polished_score"] + 1e-12
+    for r in table["runs"]:  # every handed-back policy maps features to actions: none beats the ceiling
+        assert len(r["probes"]) >= 2 and all(p["policy"] <= ceiling + 1e-9 for p in r["probes"])
+        assert abs(r["soft_minus_discrete"] - (r["probes"][-1]["soft"] - r["probes"][-1]["policy"])) < 1e-12
+    md = (tmp_path / "table2_taxi.md").read_text()
+    assert "steps to 90%" in md and (tmp_path / "table2_taxi_runs.md").is_file()
     run = tmp_path / "taxi" / "runs" / "mlp_s0" / "result.json"
     before = run.stat().st_mtime_ns
     assert runner.invoke(app, args).exit_code == 0  # second time: every run already finished
     assert run.stat().st_mtime_ns == before
     assert json.loads((tmp_path / "table2_taxi.json").read_text())["table"] == table["table"]
+
+
+def test_sampled_probe_scores_the_start_tree_on_the_probe_scenes():
+    """Highway has no exact model: the probe plays the handed-back policy on PROBE_EPISODES
+    common scenes of the twin; at step 0 a tree-DDT hands back its start tree, so the probe's
+    return is the tree's own on those scenes, and the soft policy's is a different number."""
+    from nl2policy.domains import get_domain
+    from nl2policy.language.corpus import load_corpus
+    from nl2policy.policy.convert import tree_batch_act_fn
+    from nl2policy.policy.experiment import PROBE_EPISODES, policy_probe
+    from nl2policy.policy.optimize import EVAL_SEED
+    from nl2policy.policy.rollout import evaluate_batched
+    from nl2policy.policy.sb3_policy import make_ppo
+
+    tree = load_corpus("highway")[0].tree
+    model = make_ppo("highway", "tree_ddt", 0, tree)
+    probe = policy_probe("highway", "tree_ddt")(model)
+    own = evaluate_batched("highway", tree_batch_act_fn("highway", tree), PROBE_EPISODES, EVAL_SEED).mean_return
+    assert probe["policy"] == own and probe["soft"] != own
+    mlp = policy_probe("highway", "mlp")(make_ppo("highway", "mlp", 0))
+    assert set(mlp) == {"policy", "soft"} and get_domain("highway").exact is None

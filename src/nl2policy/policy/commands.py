@@ -71,6 +71,7 @@ def policy_experiment(
     tree_seeds: int = typer.Option(2, min=1),
     baseline_seeds: int = typer.Option(3, min=1),
     out: Path = typer.Option(Path("results/policy")),
+    workers: int = typer.Option(1, min=1, help="Runs side by side in forked processes on this machine"),
     ray: Optional[str] = typer.Option(None, "--ray", help=ray_option_help()),
 ) -> None:
     """Table 2: tree-initialized DDT vs random DDT vs MLP (resumable; finished runs are skipped)."""
@@ -78,15 +79,17 @@ def policy_experiment(
 
     from nl2policy.console import console, domain_or_fail, fail, progress_bar
     from nl2policy.grid import Job, ray_failure, run_jobs
-    from nl2policy.policy.experiment import plan, run_one, select_trees, summarize
+    from nl2policy.policy.experiment import REACH, plan, run_one, select_trees, summarize, table_ceiling
     from nl2policy.policy.experiment_report import write_figure, write_table
 
     torch.set_num_threads(1)
     domain_or_fail(domain)
     command = (f"nl2policy policy-experiment --domain {domain} --steps {steps} --candidates {candidates} --best {best} "
-               f"--select-episodes {select_episodes} --tree-seeds {tree_seeds} --baseline-seeds {baseline_seeds} --out {out}")
+               f"--select-episodes {select_episodes} --tree-seeds {tree_seeds} --baseline-seeds {baseline_seeds} --out {out}"
+               + (f" --workers {workers}" if workers > 1 else ""))
     root = out / domain
     selected = select_trees(domain, candidates, best, select_episodes, 0, root)
+    ceiling = table_ceiling(domain, root)
     runs = plan(selected, tree_seeds, baseline_seeds)
     jobs = [Job(name, run_one, {"domain": domain, "method": method, "seed": seed, "steps": steps,
                                 "run_dir": root / "runs" / name, "tree_json": tree_json})
@@ -97,7 +100,7 @@ def policy_experiment(
         steps_bar: dict[str, int] = {}
 
         def started(job: Job) -> None:
-            if ray is None:  # in this process: a bar of the run's steps
+            if ray is None and workers == 1:  # in this process: a bar of the run's steps
                 steps_bar[job.name] = bar.add_task(job.name, total=steps)
                 job.kwargs["progress"] = lambda n, total, t=steps_bar[job.name]: bar.update(t, completed=n)
 
@@ -114,11 +117,11 @@ def policy_experiment(
             settings = {"steps_per_run": steps, "candidates": candidates, "best": best, "select_episodes": select_episodes,
                         "tree_seeds": list(range(tree_seeds)), "baseline_seeds": list(range(baseline_seeds)),
                         "finished_runs": f"{len(results)} of {len(runs)}"}
-            write_table(domain, summarize(results, domain), results, settings, out, command)
-            write_figure(domain, results, out)
+            write_table(domain, summarize(results, domain, ceiling["value"]), results, settings, out, command, ceiling)
+            write_figure(domain, results, out, ceiling["value"], REACH)
 
         try:
-            run_jobs(jobs, record, ray=ray, on_start=started)
+            run_jobs(jobs, record, ray=ray, on_start=started, processes=workers)
         except Exception as exc:  # Ray's own failures are the user's to fix (an address, a dead cluster)
             reason = ray_failure(exc)
             if reason is None:

@@ -1,13 +1,21 @@
 """The paper's Table 2: tree-initialized DDT vs random DDT (8 leaves) vs MLP, under PPO.
 
-Protocol: the `candidates` most frequent distinct corpus trees are ranked by the tree's own
-mean return (`select_episodes` episodes); the best `best` are the tree-DDT starts, each trained
-with `tree_seeds` seeds; each baseline gets `baseline_seeds` seeds. Metric: rolling mean of
-training episode reward (window ``Knobs.rolling_window``): *initial* = the mean of the first window,
-*best* = the highest rolling mean over the run once a full window exists. Reported: median and
-standard error (std / sqrt(runs)) across runs. Every run has its own folder with a
-checkpoint and, when done, ``result.json``; a restarted experiment skips finished runs and
-resumes unfinished ones, so a killed highway grid loses at most one checkpoint chunk.
+Protocol: the `candidates` most frequent distinct corpus policies are ranked by the tree's own
+return (exact on taxi, else `select_episodes` episodes); the best `best` are the tree-DDT
+starts, each trained with `tree_seeds` seeds; each baseline gets `baseline_seeds` seeds, all at
+the same step budget. Columns, median ± standard error (std / sqrt(runs)) across runs:
+
+- the paper's: rolling mean of training episode reward (window ``Knobs.rolling_window``),
+  *initial* = the first full window, *best* = the highest rolling mean;
+- sample efficiency: steps until the rolling reward, and until the policy the method hands
+  back (probed at every checkpoint), first reach ``REACH`` of the ceiling (``table_ceiling``);
+- what a user gets back: PPO's last handed-back policy, then (DDT methods) the kept best
+  checkpoint tree and the polished tree, each reported separately, scored as ``optimize``
+  scores them (exact on taxi, common sampled scenes on highway);
+- the soft-vs-discrete gap: the soft policy PPO trained minus the policy handed back.
+
+Every run has its own folder with a checkpoint and, when done, ``result.json``; a restarted
+experiment skips finished runs and resumes unfinished ones.
 """
 
 from __future__ import annotations
@@ -21,13 +29,18 @@ import numpy as np
 
 from nl2policy.language.corpus import load_corpus
 from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn
+from nl2policy.policy.keep_best import tree_from_json, tree_scorer
 from nl2policy.policy.optimize import EVAL_SEED, checkpoint_tree_score, rolling_mean, train_checkpointed, write_curve
+from nl2policy.policy.polish import can_polish, polish_any
 from nl2policy.policy.rollout import evaluate, tree_policy
-from nl2policy.policy.sb3_policy import METHODS, actor_ddt, make_ppo, soft_act_fn
+from nl2policy.policy.sb3_policy import METHODS, action_probs_fn, actor_ddt, make_ppo, soft_act_fn
 from nl2policy.trees import parse_tree, tree_to_json
 from nl2policy.domains import get_domain
 
 LABEL = {"tree_ddt": "tree-initialized DDT", "random_ddt": "random DDT (8 leaves)", "mlp": "MLP (3 layers)"}
+CHECKPOINTS = 20  # probes per run: the resolution of "steps to 90 % of the ceiling" on the handed-back policy
+PROBE_EPISODES = 500  # fast-sim scenes per probe where there is no exact model (common to all runs)
+REACH = 0.9  # the issue's sample-efficiency level: steps until 90 % of the ceiling
 
 
 def distinct_policies(domain: str) -> list[tuple[dict, int]]:
@@ -72,16 +85,92 @@ def select_trees(domain: str, candidates: int, best: int, episodes: int, seed: i
     return ranked[:best]
 
 
+def table_ceiling(domain: str, root: Path) -> dict:
+    """The yardstick of Table 2's "steps to 90 %" column, cached in `root`/ceiling.json.
+
+    With an exact model (taxi): the best stationary policy on the features, exactly (the
+    issue's bar for the MLP's plateau; the optimum sees the tick, which no method sees). Else
+    (highway): the best distinct corpus policy on the probe's scenes (``PROBE_EPISODES`` fast-sim
+    episodes from ``EVAL_SEED``), the same scenes every probe uses, so the two compare."""
+    path = root / "ceiling.json"
+    if path.is_file():
+        return json.loads(path.read_text())
+    d = get_domain(domain)
+    if d.exact is not None:
+        from nl2policy.policy.taxi_ceilings import best_stationary_policy
+
+        found = best_stationary_policy(d.exact.tables())
+        entry = {"value": found.value, "what": "best stationary policy on the features (exact)"}
+    else:
+        from nl2policy.policy.convert import tree_batch_act_fn
+        from nl2policy.policy.rollout import evaluate_batched_many
+
+        trees = [parse_tree(t, d.vocab) for t, _ in distinct_policies(domain)]
+        means = []
+        for k in range(0, len(trees), 8):  # 8 x 500 scenes a batch keeps memory small
+            batch = [tree_batch_act_fn(domain, t) for t in trees[k:k + 8]]
+            means += [e.mean_return for e in evaluate_batched_many(domain, batch, PROBE_EPISODES, EVAL_SEED)]
+        best = int(np.argmax(means))
+        entry = {"value": float(means[best]), "tree": tree_to_json(trees[best]),
+                 "what": f"best of {len(trees)} distinct corpus policies, {PROBE_EPISODES} {d.train_env_id} "
+                         f"episodes from seed {EVAL_SEED}"}
+    root.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(entry, indent=2))
+    return entry
+
+
+def policy_probe(domain: str, method: str) -> Optional[Callable]:
+    """What Table 2 measures at every checkpoint: the return of the policy the method hands
+    back (a DDT method: its discretized tree; the MLP: its greedy actions) and of the soft
+    policy PPO trains (sampled actions). Exact where the domain has an exact model; else on
+    ``PROBE_EPISODES`` fast-sim scenes from ``EVAL_SEED``, common to every run and checkpoint.
+    None for a domain with neither."""
+    d = get_domain(domain)
+
+    def handed_back(model):
+        return ddt_to_tree(domain, actor_ddt(model)) if method != "mlp" else None
+
+    if d.exact is not None:
+        def exact_probe(model) -> dict:
+            tree = handed_back(model)
+            act = tree_act_fn(domain, tree) if tree is not None else soft_act_fn(model, deterministic=True)
+            return {"policy": float(d.exact.expected_return(act)),
+                    "soft": float(d.exact.expected_return_mixed(action_probs_fn(model)))}
+
+        return exact_probe
+    if d.train_env_id is None:
+        return None
+    from nl2policy.policy.convert import tree_batch_act_fn
+    from nl2policy.policy.rollout import evaluate_batched_many
+
+    def sampled_probe(model) -> dict:
+        probs = action_probs_fn(model)
+        rng = np.random.default_rng(EVAL_SEED)
+        tree = handed_back(model)
+        greedy = tree_batch_act_fn(domain, tree) if tree is not None else (lambda x: probs(x).argmax(axis=1))
+
+        def sampled(x):  # inverse-CDF draws: one uniform per row
+            p = probs(x)
+            return np.minimum((p.cumsum(axis=1) < rng.random((len(p), 1))).sum(axis=1), p.shape[1] - 1)
+
+        policy, soft = evaluate_batched_many(domain, [greedy, sampled], PROBE_EPISODES, EVAL_SEED)
+        return {"policy": policy.mean_return, "soft": soft.mean_return}
+
+    return sampled_probe
+
+
 def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree_json: Optional[dict],
-            progress: Optional[Callable[[int, int], None]] = None) -> dict:
+            progress: Optional[Callable[[int, int], None]] = None, polish: bool = True) -> dict:
+    """One run of the grid: PPO for `steps`, then the records Table 2 reads (result.json)."""
     result_path = run_dir / "result.json"
     if result_path.is_file():
         return json.loads(result_path.read_text())
     d = get_domain(domain)
     tree = parse_tree(tree_json, d.vocab) if tree_json else None
-    score = checkpoint_tree_score(domain) if method != "mlp" else None
-    model, episodes, seconds, best = train_checkpointed(lambda: make_ppo(domain, method, seed, tree), domain, seed,
-                                                        steps, run_dir, progress, score)
+    score = checkpoint_tree_score(domain, sampled=True) if method != "mlp" else None
+    model, episodes, seconds, best, probes = train_checkpointed(
+        lambda: make_ppo(domain, method, seed, tree), domain, seed, steps, run_dir, progress, score,
+        probe=policy_probe(domain, method), checkpoints=CHECKPOINTS)
     window = d.knobs.rolling_window
     write_curve(episodes, window, run_dir, f"{domain}: {LABEL[method]} seed {seed}")
     rolling = rolling_mean([r for _, r in episodes], window)
@@ -89,25 +178,24 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
     result = {"domain": domain, "method": method, "seed": seed, "steps": int(model.num_timesteps),
               "seconds": seconds, "episodes": len(episodes), "window": window, "tree": tree_json,
               "initial": float(full[0]), "best": float(full.max()), "final": float(rolling[-1]),
-              "curve": [[s, float(m)] for (s, _), m in zip(episodes, rolling)]}
-    if d.exact is not None:  # what the user gets back, judged exactly: the discretized tree (greedy MLP)
-        final_act = (tree_act_fn(domain, ddt_to_tree(domain, actor_ddt(model))) if method != "mlp"
-                     else soft_act_fn(model, deterministic=True))
-        result["exact_final"] = d.exact.expected_return(final_act)
+              "curve": [[s, float(m)] for (s, _), m in zip(episodes, rolling)], "probes": probes,
+              "probe_scored_by": "exact model" if d.exact is not None else
+                                 f"{PROBE_EPISODES} {d.train_env_id} episodes from seed {EVAL_SEED}"}
+    if probes:  # PPO's own discretization loss: the handed-back policy minus the soft one, at the end
+        result["soft_minus_discrete"] = probes[-1]["soft"] - probes[-1]["policy"]
+    if method != "mlp":  # what a user gets back: PPO's last tree, the kept tree, the polished one
+        last = ddt_to_tree(domain, actor_ddt(model))
+        result.update({"last_tree": tree_to_json(last), "last_tree_has_raw_tests": has_raw_tests(last),
+                       "kept_tree": best["tree"], "kept_score": best["score"], "kept_step": best["step"]})
+        scorer = tree_scorer(domain)[0]
         if tree is not None:
-            result["exact_initial_tree"] = d.exact.expected_return(tree_act_fn(domain, tree))
-        if best is not None:  # the best discretized tree over the run's checkpoints (exact score)
-            result.update({"exact_best_tree": best["score"], "best_tree_step": best["step"], "best_tree": best["tree"]})
-    if method == "tree_ddt":  # how far is the discretized tree from the soft DDT it came from?
-        final_tree = ddt_to_tree(domain, actor_ddt(model))
-        n = d.knobs.eval_episodes
-        result.update({
-            "final_tree": tree_to_json(final_tree), "final_tree_has_raw_tests": has_raw_tests(final_tree),
-            "eval_episodes": n,
-            "eval_soft_ddt": evaluate(domain, soft_act_fn(model, False), n, EVAL_SEED).mean_return,
-            "eval_discretized": evaluate(domain, tree_act_fn(domain, final_tree), n, EVAL_SEED).mean_return,
-            "eval_initial_tree": evaluate(domain, tree_policy(domain, tree), n, EVAL_SEED).mean_return,
-        })
+            result["initial_tree_score"] = scorer(tree)
+        kept = tree_from_json(best["tree"])
+        if polish and can_polish(domain) and not has_raw_tests(kept):
+            polished = polish_any(domain, kept)
+            result.update({"polished_tree": tree_to_json(polished.tree), "polished_score": polished.value,
+                           "polish_seconds": polished.seconds})
+        result["scored_by"] = tree_scorer(domain)[1]
     result_path.write_text(json.dumps(result))
     (run_dir / "checkpoint.zip").unlink(missing_ok=True)  # finished: result.json is the record
     return result
@@ -121,41 +209,55 @@ def plan(selected: list[dict], tree_seeds: int, baseline_seeds: int) -> list[tup
     return runs
 
 
-def summarize(results: list[dict], domain: str) -> dict:
-    table = {}
+def steps_to(points: list, level: float) -> Optional[int]:
+    """The first step at which a [(step, value)] series reaches `level`; None if it never does."""
+    return next((int(step) for step, value in points if value >= level), None)
+
+
+def _stats(values: list[float]) -> dict:
+    v = np.asarray(values, dtype=float)
+    return {"median": float(np.median(v)), "mean": float(v.mean()),
+            "stderr": float(v.std(ddof=1) / np.sqrt(len(v))) if len(v) > 1 else 0.0}
+
+
+def _reach(steps: list[Optional[int]]) -> dict:
+    """Steps to a level across runs: the median counts a run that never reached it as
+    infinitely slow, so the median is None when half the runs or more never did."""
+    ordered = sorted(float("inf") if s is None else s for s in steps)
+    median = float(np.median(ordered)) if ordered else float("inf")
+    return {"median": None if median == float("inf") else median, "reached": sum(s is not None for s in steps),
+            "runs": len(steps), "values": steps}
+
+
+def summarize(results: list[dict], domain: str, ceiling: float, level: float = REACH) -> dict:
+    """Table 2's numbers per method (median ± standard error across runs) from the runs'
+    result.json records; `ceiling` is ``table_ceiling``'s value."""
+    table: dict = {"ceiling": ceiling, "reach_level": level}
     for method in METHODS:
         rows = [r for r in results if r["method"] == method]
         if not rows:
             continue
-        entry = {"runs": len(rows)}
+        window = rows[0]["window"]
+        entry: dict = {"runs": len(rows)}
         for key in ("initial", "best", "final"):
-            values = np.array([r[key] for r in rows])
-            entry[key] = {"median": float(np.median(values)),
-                          "stderr": float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0}
-        if "exact_final" in rows[0]:
-            exact = np.array([r["exact_final"] for r in rows])
-            entry["exact_final"] = {"median": float(np.median(exact)), "mean": float(exact.mean()),
-                                    "stderr": float(exact.std(ddof=1) / np.sqrt(len(exact))) if len(exact) > 1 else 0.0}
-        if "exact_best_tree" in rows[0]:
-            best = np.array([r["exact_best_tree"] for r in rows])
-            entry["exact_best_tree"] = {"median": float(np.median(best)), "mean": float(best.mean()),
-                                        "stderr": float(best.std(ddof=1) / np.sqrt(len(best))) if len(best) > 1 else 0.0}
-        if method == "tree_ddt" and "exact_initial_tree" in rows[0]:
-            for name, key in (("exact_gain", "exact_final"), ("exact_best_gain", "exact_best_tree")):
-                gain = np.array([r[key] - r["exact_initial_tree"] for r in rows])
-                entry[name] = {"median": float(np.median(gain)), "mean": float(gain.mean()),
-                               "improved": int((gain > 1e-9).sum()), "worse": int((gain < -1e-9).sum())}
-        if method == "tree_ddt":
-            gaps = [r["eval_discretized"] - r["eval_soft_ddt"] for r in rows]
-            entry["discretized_minus_soft"] = {"mean": float(np.mean(gaps)), "values": gaps}
-            entry["raw_test_trees"] = sum(r["final_tree_has_raw_tests"] for r in rows)
-        table[method] = entry
-    exact = get_domain(domain).exact
-    if exact is not None:
-        optimum = exact.optimum()
-        for entry in table.values():
-            for key in ("initial", "best", "final", "exact_final", "exact_best_tree"):
+            entry[key] = _stats([r[key] for r in rows])
+        entry["steps_to_reach_rolling"] = _reach([steps_to(r["curve"][window - 1:], level * ceiling) for r in rows])
+        if rows[0].get("probes"):
+            entry["steps_to_reach_policy"] = _reach([steps_to([(p["step"], p["policy"]) for p in r["probes"]],
+                                                               level * ceiling) for r in rows])
+            entry["last_policy"] = _stats([r["probes"][-1]["policy"] for r in rows])
+            entry["soft_minus_discrete"] = {**_stats([r["soft_minus_discrete"] for r in rows]),
+                                            "values": [r["soft_minus_discrete"] for r in rows]}
+        for key in ("kept_score", "polished_score"):
+            if all(key in r for r in rows):
+                entry[key] = _stats([r[key] for r in rows])
+        if all("initial_tree_score" in r for r in rows):
+            entry["initial_tree_score"] = _stats([r["initial_tree_score"] for r in rows])
+            for key in ("kept_score", "polished_score"):
                 if key in entry:
-                    entry[key]["percent_of_optimal"] = 100.0 * entry[key]["median"] / optimum
-        table["optimal_return"] = optimum
+                    gain = np.array([r[key] - r["initial_tree_score"] for r in rows])
+                    entry[f"{key}_gain"] = {"median": float(np.median(gain)), "improved": int((gain > 1e-9).sum()),
+                                            "worse": int((gain < -1e-9).sum())}
+        entry["raw_test_trees"] = sum(bool(r.get("last_tree_has_raw_tests")) for r in rows)
+        table[method] = entry
     return table

@@ -1,106 +1,148 @@
-"""Writing Table 2 (Markdown + JSON) and the learning-curve figure for one domain."""
+"""Writing Table 2 (Markdown + JSON, its runs in a second file) and the learning-curve figure."""
 
 from __future__ import annotations
 
 import json
 import warnings
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
-from nl2policy.domains import get_domain
 from nl2policy.policy.experiment import LABEL
 from nl2policy.policy.sb3_policy import METHODS
 from nl2policy.report import provenance
 
 
-def write_table(domain: str, table: dict, results: list[dict], settings: dict, out: Path, command: str) -> Path:
+def _cell(stats: Optional[dict], ceiling: float) -> str:
+    if not stats:
+        return "-"
+    return f"{stats['median']:.3f} ± {stats['stderr']:.3f} ({100 * stats['median'] / ceiling:.0f}%)"
+
+
+def _reach_cell(reach: Optional[dict]) -> str:
+    if not reach:
+        return "-"
+    median = "never" if reach["median"] is None else f"{reach['median'] / 1000:,.0f}k"
+    return f"{median} ({reach['reached']}/{reach['runs']})"
+
+
+def _gap_cell(gap: Optional[dict]) -> str:
+    return "-" if not gap else f"{gap['median']:+.3f}"
+
+
+def write_table(domain: str, table: dict, results: list[dict], settings: dict, out: Path, command: str,
+                ceiling: dict) -> Path:
+    """table2_<domain>.md: the table a reader needs, on one screen; table2_<domain>_runs.md: every run."""
     meta = provenance(command)
-    window = results[0]["window"]
-    taxi = get_domain(domain).exact is not None  # exact columns where the domain has an exact model
+    window, c, level = results[0]["window"], table["ceiling"], table["reach_level"]
+    scored = results[0].get("probe_scored_by", "?")
     lines = [f"# Table 2 ({domain}): PPO from a tree-initialized DDT vs baselines", "",
-             f"Made by: `{command}`  ", f"On: {meta['made']}  ",
-             f"Settings: {json.dumps(settings)}  ",
-             f"Metric: rolling mean of training episode reward over {window} episodes; initial = first full window, "
-             "best = highest rolling mean; median ± standard error across runs.", "",
-             "| method | runs | initial | best | final |"
-             + (" initial % opt | best % opt | final policy, exact | % opt | best checkpoint tree, exact | % opt |"
-                if taxi else ""),
-             "|---|---:|---:|---:|---:|" + ("---:|---:|---:|---:|---:|---:|" if taxi else "")]
+             f"Made by: `{command}`  ", f"On: {meta['made']}  ", f"Settings: {json.dumps(settings)}  ",
+             f"Ceiling: {c:.3f}, {ceiling['what']}", "",
+             "| method | runs | initial | best | steps to "
+             f"{100 * level:.0f}%: rolling | steps to {100 * level:.0f}%: handed back | handed back, last | "
+             "kept tree | + polish | soft - discrete |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for method in METHODS:
         if method not in table:
             continue
         e = table[method]
-        cells = [f"{e[k]['median']:.3f} ± {e[k]['stderr']:.3f}" for k in ("initial", "best", "final")]
-        row = f"| {LABEL[method]} | {e['runs']} | " + " | ".join(cells) + " |"
-        if taxi:
-            row += f" {e['initial']['percent_of_optimal']:.1f} | {e['best']['percent_of_optimal']:.1f} |"
-            exact = e.get("exact_final")
-            for exact in (e.get("exact_final"), e.get("exact_best_tree")):
-                row += (f" {exact['median']:.3f} ± {exact['stderr']:.3f} | {exact['percent_of_optimal']:.1f} |" if exact
-                        else " - | - |")
-        lines.append(row)
-    if taxi:
-        lines += ["", f"Optimal expected return (value iteration on the exact model): {table['optimal_return']:.3f}", "",
-                  "Exact columns: the exact expected return (`domains.taxi.expected_return`, no sampling). Final "
-                  "policy = the discretized final tree (DDT methods) or the greedy final MLP. Best checkpoint tree = "
-                  "the best of the discretized trees at step 0 and after every checkpoint chunk (DDT methods; what "
-                  "`nl2policy optimize` writes as best_tree.json)."]
-        for key, what in (("exact_gain", "final tree"), ("exact_best_gain", "best checkpoint tree")):
-            gain = table.get("tree_ddt", {}).get(key)
-            if gain:
-                lines += ["", f"Tree-DDT runs, {what} minus initial tree (exact): median {gain['median']:+.3f}, "
-                              f"mean {gain['mean']:+.3f}; better in {gain['improved']}, worse in {gain['worse']} "
-                              f"of {table['tree_ddt']['runs']} runs"]
-    if "tree_ddt" in table:
-        gap = table["tree_ddt"]["discretized_minus_soft"]
-        lines += ["", f"Discretized final tree minus soft final DDT (sampled), mean over tree-DDT runs, "
-                      f"{results[0].get('eval_episodes', '?')} eval episodes each: {gap['mean']:+.3f}; "
-                      f"final trees with raw (non-vocabulary) tests: {table['tree_ddt']['raw_test_trees']}"]
-    exact_cols = taxi and any("exact_final" in r for r in results)
-    lines += ["", "| run | initial | best | final |"
-              + (" initial tree, exact | final policy, exact | best checkpoint tree, exact (step) |" if exact_cols else "")
-              + " steps | seconds |", "|---|---:|---:|---:|" + ("---:|---:|---:|" if exact_cols else "") + "---:|---:|"]
-    for r in results:
-        name = r["method"] + (f" tree#{r.get('tree_rank', '')}" if r["method"] == "tree_ddt" else "")
-        exact = ""
-        if exact_cols:
-            start = r.get("exact_initial_tree")
-            exact = f" {start:.3f} |" if start is not None else " - |"
-            exact += f" {r['exact_final']:.3f} |" if "exact_final" in r else " - |"
-            exact += f" {r['exact_best_tree']:.3f} ({r['best_tree_step']}) |" if "exact_best_tree" in r else " - |"
-        lines.append(f"| {name} seed {r['seed']} | {r['initial']:.3f} | {r['best']:.3f} | {r['final']:.3f} |{exact}"
-                     f" {r['steps']} | {r['seconds']:.0f} |")
+        lines.append(f"| {LABEL[method]} | {e['runs']} | {_cell(e['initial'], c)} | {_cell(e['best'], c)} | "
+                     f"{_reach_cell(e['steps_to_reach_rolling'])} | {_reach_cell(e.get('steps_to_reach_policy'))} | "
+                     f"{_cell(e.get('last_policy'), c)} | {_cell(e.get('kept_score'), c)} | "
+                     f"{_cell(e.get('polished_score'), c)} | {_gap_cell(e.get('soft_minus_discrete'))} |")
+    tree_rows = table.get("tree_ddt", {})
+    lines += ["", f"Cells: median ± standard error across runs (% of the ceiling). Initial and best: the paper's columns, "
+                  f"the rolling mean of training episode reward over {window} episodes (initial = the first full window, "
+                  "best = the highest). Steps to "
+                  f"{100 * level:.0f}%: the first step at which the rolling reward, or the policy the method hands back "
+                  "(DDT: its discretized tree; MLP: its greedy actions, probed at every checkpoint), reaches "
+                  f"{100 * level:.0f}% of the ceiling; the median counts a run that never does as infinitely slow "
+                  "(in brackets: runs that did). Handed back, last: that policy at the end of training; kept tree: "
+                  "the best of the start tree and every checkpoint's discretized tree; + polish: the local search "
+                  "from the kept tree (`optimize` returns the better of the two). Soft - discrete: the soft policy "
+                  f"PPO trained minus the policy handed back, at the end. Returns of the handed-back policies: {scored}; "
+                  f"kept and polished trees: {results[0].get('scored_by', '?')} (on highway, scenes apart from the probe's)."]
+    for key, what in (("kept_score_gain", "kept tree"), ("polished_score_gain", "polished tree")):
+        gain = tree_rows.get(key)
+        if gain:
+            lines.append(f"\nTree-DDT runs, {what} minus start tree: median {gain['median']:+.3f}; better in "
+                         f"{gain['improved']}, worse in {gain['worse']} of {tree_rows['runs']} runs.")
+    if any(table.get(m, {}).get("raw_test_trees") for m in METHODS):
+        lines.append("\nLast trees with raw (non-vocabulary) tests: "
+                     + ", ".join(f"{LABEL[m]} {table[m]['raw_test_trees']}" for m in METHODS if m in table))
+    lines += ["", f"Every run: `table2_{domain}_runs.md`; curves: `curves_{domain}.png`."]
     md = out / f"table2_{domain}.md"
     md.write_text("\n".join(lines) + "\n")
+    write_runs(domain, results, out, command)
     slim = [{k: v for k, v in r.items() if k != "curve"} for r in results]
-    (out / f"table2_{domain}.json").write_text(json.dumps({"meta": meta, "settings": settings, "table": table, "runs": slim}, indent=2))
+    (out / f"table2_{domain}.json").write_text(json.dumps({"meta": meta, "settings": settings, "ceiling": ceiling,
+                                                           "table": table, "runs": slim}, indent=2))
     return md
 
 
-def write_figure(domain: str, results: list[dict], out: Path) -> Path:
+def write_runs(domain: str, results: list[dict], out: Path, command: str) -> Path:
+    """One row per run: the detail behind each median of Table 2."""
+    lines = [f"# Table 2 ({domain}): every run", "", f"Made by: `{command}`", "",
+             "| run | initial | best | start tree | handed back, last | kept tree (step) | + polish | soft - discrete | "
+             "steps | seconds |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+
+    def num(value: Optional[float], fmt: str = ".3f") -> str:
+        return "-" if value is None else format(value, fmt)
+
+    for r in results:
+        name = r["method"] + (f" tree#{r['tree_rank']}" if "tree_rank" in r else "")
+        last = r["probes"][-1]["policy"] if r.get("probes") else None
+        kept = f"{r['kept_score']:.3f} ({r['kept_step']})" if "kept_score" in r else "-"
+        lines.append(f"| {name} seed {r['seed']} | {r['initial']:.3f} | {r['best']:.3f} | "
+                     f"{num(r.get('initial_tree_score'))} | {num(last)} | {kept} | {num(r.get('polished_score'))} | "
+                     f"{num(r.get('soft_minus_discrete'), '+.3f')} | {r['steps']} | {r['seconds']:.0f} |")
+    path = out / f"table2_{domain}_runs.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _band(curves: list[list], grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Median and the interquartile range across runs of [(step, value)] curves on `grid`."""
+    interp = np.array([np.interp(grid, [s for s, _ in c], [v for _, v in c], left=np.nan) for c in curves])
+    with warnings.catch_warnings():  # grid points before any run's first episode are all NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return (np.nanmedian(interp, axis=0), np.nanpercentile(interp, 25, axis=0),
+                np.nanpercentile(interp, 75, axis=0))
+
+
+def write_figure(domain: str, results: list[dict], out: Path, ceiling: Optional[float] = None,
+                 level: float = 0.9) -> Path:
+    """curves_<domain>.png: the rolling training reward and (where probed) the return of the
+    policy each method hands back, against env steps; median and interquartile band per method."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 4))
-    steps_max = max(r["steps"] for r in results)
-    grid = np.linspace(0, steps_max, 200)
-    for method in METHODS:
-        curves = [r["curve"] for r in results if r["method"] == method and r["curve"]]
-        if not curves:
-            continue
-        interp = np.array([np.interp(grid, [s for s, _ in c], [m for _, m in c], left=np.nan) for c in curves])
-        with warnings.catch_warnings():  # grid points before any run's first episode are all NaN
-            warnings.simplefilter("ignore", RuntimeWarning)
-            median, low, high = (np.nanmedian(interp, axis=0), np.nanmin(interp, axis=0), np.nanmax(interp, axis=0))
-        ax.plot(grid, median, label=f"{LABEL[method]} (median of {len(curves)})")
-        ax.fill_between(grid, low, high, alpha=0.15)
-    ax.set_xlabel("env steps")
-    ax.set_ylabel(f"rolling mean episode reward ({results[0]['window']} episodes)")
-    ax.set_title(f"{domain}: PPO learning curves (band: min-max across runs)")
-    ax.legend()
+    probed = any(r.get("probes") for r in results)
+    fig, axes = plt.subplots(1, 2 if probed else 1, figsize=(12 if probed else 7, 4), squeeze=False)
+    grid = np.linspace(0, max(r["steps"] for r in results), 200)
+    panels = [("curve", f"rolling mean training reward ({results[0]['window']} episodes)")]
+    if probed:
+        panels.append(("probes", f"return of the handed-back policy ({results[0].get('probe_scored_by', '')})"))
+    for ax, (key, ylabel) in zip(axes[0], panels):
+        for method in METHODS:
+            curves = [r["curve"] if key == "curve" else [(p["step"], p["policy"]) for p in r["probes"]]
+                      for r in results if r["method"] == method and r.get(key)]
+            if not curves:
+                continue
+            median, low, high = _band(curves, grid)
+            ax.plot(grid, median, label=f"{LABEL[method]} (median of {len(curves)})")
+            ax.fill_between(grid, low, high, alpha=0.15)
+        if ceiling is not None:
+            ax.axhline(ceiling, color="black", lw=0.8, ls="--", label="ceiling")
+            ax.axhline(level * ceiling, color="gray", lw=0.8, ls=":", label=f"{100 * level:.0f}% of the ceiling")
+        ax.set_xlabel("env steps")
+        ax.set_ylabel(ylabel, fontsize=8)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"{domain}: PPO learning curves (band: interquartile range across runs)")
     fig.tight_layout()
     path = out / f"curves_{domain}.png"
     fig.savefig(path, dpi=120)

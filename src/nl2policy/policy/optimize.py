@@ -18,7 +18,7 @@ import csv
 import json
 import time
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Callable, NamedTuple, Optional
 
 import numpy as np
 import torch
@@ -93,16 +93,28 @@ def checkpoint_tree_score(domain: str, sampled: bool = False,
     return score
 
 
+class Trained(NamedTuple):
+    """What ``train_checkpointed`` hands back."""
+
+    model: PPO
+    episodes: list  # [(step, episode return)] of the training episodes, all sessions
+    seconds: float  # training seconds, all sessions
+    best: Optional[dict]  # the best checkpoint tree {"step", "tree", "score"}; None without score_tree
+    probes: list  # [{"step", **probe(model)}] at step 0 and after every chunk; [] without probe
+
+
 def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int, steps: int, run_dir: Path,
                        progress: Progress = None,
                        score_tree: Optional[Callable[[PPO], tuple[dict, float]]] = None,
-                       simulator: str = "fast") -> tuple[PPO, list, float, Optional[dict]]:
-    """Train to `steps` env steps, checkpointing into `run_dir`; resumes a saved run.
+                       simulator: str = "fast", probe: Optional[Callable[[PPO], dict]] = None,
+                       checkpoints: int = 10) -> Trained:
+    """Train to `steps` env steps in about `checkpoints` chunks, checkpointing into `run_dir`
+    after each; resumes a saved run.
 
     With `score_tree`, the discretized tree is scored after every chunk and the best one kept
-    (``{"step", "tree", "score"}``; the initial actor's tree counts as step 0).
-    Returns the model, the episode log [(step, return)], the training seconds (all sessions)
-    and the best tree record (None without `score_tree`)."""
+    (``{"step", "tree", "score"}``; the initial actor's tree counts as step 0). With `probe`,
+    its measurements of the model (Table 2: the exact return of the policy a method hands
+    back) are recorded at step 0 and after every chunk, so a curve of them survives resumes."""
     # PPO here runs batch-of-one forward passes through tiny nets: extra intra-op threads only
     # contend (measured 25x slower with 2 threads on a busy 2-core machine), so use one.
     torch.set_num_threads(1)
@@ -120,18 +132,20 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
         model = TreePPO.load(ckpt_path, env=make_vec_env(domain, resumed_seed, simulator), device="cpu")
         model.set_random_seed(resumed_seed)  # load reseeds with the run's first seed: new episodes, not a replay
         episodes, seconds, chunks = [tuple(e) for e in state["episodes"]], state["seconds"], state["chunks"]
-        best = state.get("best_tree")
+        best, probes = state.get("best_tree"), state.get("probes", [])
         if best is None and score_tree is not None:  # a checkpoint from before its run tracked trees
             tree_json, score = score_tree(model)
             best = {"step": int(model.num_timesteps), "tree": tree_json, "score": score}
     else:
         model, episodes, seconds, chunks = model_factory(), [], 0.0, 0
-        best = None
+        best, probes = None, []
         if score_tree is not None:
             tree_json, score = score_tree(model)
             best = {"step": 0, "tree": tree_json, "score": score}
+        if probe is not None:
+            probes.append({"step": 0, **probe(model)})
     rollout = model.n_steps * model.n_envs
-    chunk = rollout * max(1, steps // (10 * rollout))  # about ten checkpoints per run
+    chunk = rollout * max(1, steps // (checkpoints * rollout))
     total = -(-steps // rollout) * rollout  # PPO trains whole rollouts
     log = EpisodeLog(episodes, total, progress)
     while model.num_timesteps < steps:
@@ -143,13 +157,15 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
             tree_json, score = score_tree(model)
             if score > best["score"]:
                 best = {"step": int(model.num_timesteps), "tree": tree_json, "score": score}
+        if probe is not None:
+            probes.append({"step": int(model.num_timesteps), **probe(model)})
         _write_atomically(ckpt_path, model.save)
         state = {"steps": int(model.num_timesteps), "seconds": seconds, "chunks": chunks, "episodes": episodes,
-                 "best_tree": best, "simulator": trained_on}
+                 "best_tree": best, "probes": probes, "simulator": trained_on}
         _write_atomically(state_path, lambda path: path.write_text(json.dumps(state)))
     if progress:
         progress(total, total)
-    return model, episodes, seconds, best
+    return Trained(model, episodes, seconds, best, probes)
 
 
 def rolling_mean(returns: list[float], window: int) -> np.ndarray:
@@ -209,7 +225,7 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
         raise OptimizeRefused(f"{out} holds a checkpoint of a run from a different tree; choose another --out")
     tree_path.write_text(json.dumps(tree_to_json(tree), indent=2))
     scorer, rule = tree_scorer(domain)
-    model, episodes, seconds, best = train_checkpointed(
+    model, episodes, seconds, best, _ = train_checkpointed(
         lambda: make_ppo(domain, "tree_ddt", seed, tree, simulator=simulator), domain, seed, steps, out, progress,
         checkpoint_tree_score(domain, True, scorer), simulator)
     last_tree = ddt_to_tree(domain, actor_ddt(model))
