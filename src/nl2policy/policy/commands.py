@@ -115,7 +115,7 @@ def policy_experiment(
             # reports what finished and Ray's order of completion changes nothing
             results = [finished[j.name] for j in jobs if j.name in finished]
             settings = {"steps_per_run": steps, "candidates": candidates, "best": best, "select_episodes": select_episodes,
-                        "tree_seeds": list(range(tree_seeds)), "baseline_seeds": list(range(baseline_seeds)),
+                        "tree_seeds": sorted(seed for _, method, seed, _ in runs if method == "tree_ddt"), "baseline_seeds": list(range(baseline_seeds)),
                         "finished_runs": f"{len(results)} of {len(runs)}"}
             write_table(domain, summarize(results, domain, ceiling["value"]), results, settings, out, command, ceiling)
             write_figure(domain, results, out, ceiling["value"], REACH)

@@ -202,8 +202,11 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
 
 
 def plan(selected: list[dict], tree_seeds: int, baseline_seeds: int) -> list[tuple[str, str, int, Optional[dict]]]:
-    """(run name, method, seed, tree) for every run of the grid."""
-    runs = [(f"tree_ddt_t{k}_s{s}", "tree_ddt", s, sel["tree"]) for k, sel in enumerate(selected) for s in range(tree_seeds)]
+    """(run name, method, seed, tree) for every run of the grid. Tree-DDT runs number their
+    seeds across the start trees (tree k: seeds k * tree_seeds ...), so every run of a method
+    has its own seed and five trees with one seed each are five seeds."""
+    runs = [(f"tree_ddt_t{k}_s{k * tree_seeds + s}", "tree_ddt", k * tree_seeds + s, sel["tree"])
+            for k, sel in enumerate(selected) for s in range(tree_seeds)]
     for method in ("random_ddt", "mlp"):
         runs += [(f"{method}_s{s}", method, s, None) for s in range(baseline_seeds)]
     return runs
