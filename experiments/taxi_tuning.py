@@ -1,6 +1,6 @@
 """Does PPO change the tree? Old vs new taxi settings, judged by the EXACT return of the tree.
 
-Run as ``python -m nl2policy.policy.tuning [--steps N] [--seeds K] [--out DIR]``: for three
+Run as ``python -m experiments.taxi_tuning [--steps N] [--seeds K] [--out DIR]``: for three
 corpus policies of different quality (good, median, poor) and each settings variant, PPO
 from the tree-initialized DDT; after every ``CHUNK`` steps the DDT is discretized and the
 tree's exact expected return (``domains.taxi.expected_return``) recorded. Writes
@@ -70,7 +70,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results/policy"))
     args = parser.parse_args()
     torch.set_num_threads(1)
-    command = f"python -m nl2policy.policy.tuning --steps {args.steps} --seeds {args.seeds} --out {args.out}"
+    command = f"python -m experiments.taxi_tuning --steps {args.steps} --seeds {args.seeds} --out {args.out}"
     optimum = optimal_policy(TaxiModel())[0]
     rows = []
     for label, variant in VARIANTS.items():
