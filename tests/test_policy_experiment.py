@@ -35,8 +35,11 @@ def test_tiny_experiment_writes_table_and_skips_finished_runs(tmp_path):
     returns = [c["exact_return"] for c in selected["candidates"]]  # taxi ranks by the exact return
     assert returns == sorted(returns, reverse=True) and selected["selected"] == selected["candidates"][:1]
     runs = {r["method"]: r for r in table["runs"]}
-    ceiling = table["ceiling"]["value"]
+    ceiling = table["table"]["yardsticks"]["ceiling"]["value"]
     assert abs(ceiling - 8.386) < 1e-3  # the best stationary feature policy (results/policy/ceilings_taxi.md)
+    y = table["table"]["yardsticks"]
+    assert max(y["floor"]["value"], y["constant"]["value"]) < ceiling  # taxi: every state-blind policy earns 0
+    assert abs(table["table"]["reach_return"] - (y["floor"]["value"] + 0.9 * (ceiling - y["floor"]["value"]))) < 1e-12
     tree_run = runs["tree_ddt"]
     # the probe at step 0 scores the start tree itself (the fresh DDT discretizes back to it)
     assert tree_run["probes"][0] == {"step": 0, **tree_run["probes"][0]}

@@ -79,7 +79,7 @@ def policy_experiment(
 
     from nl2policy.console import console, domain_or_fail, fail, progress_bar
     from nl2policy.grid import Job, ray_failure, run_jobs
-    from nl2policy.policy.experiment import REACH, plan, run_one, select_trees, summarize, table_ceiling
+    from nl2policy.policy.experiment import REACH, plan, run_one, select_trees, summarize, table_yardsticks
     from nl2policy.policy.experiment_report import write_figure, write_table
 
     torch.set_num_threads(1)
@@ -89,7 +89,7 @@ def policy_experiment(
                + (f" --workers {workers}" if workers > 1 else ""))
     root = out / domain
     selected = select_trees(domain, candidates, best, select_episodes, 0, root)
-    ceiling = table_ceiling(domain, root)
+    yardsticks = table_yardsticks(domain, root)
     runs = plan(selected, tree_seeds, baseline_seeds)
     jobs = [Job(name, run_one, {"domain": domain, "method": method, "seed": seed, "steps": steps,
                                 "run_dir": root / "runs" / name, "tree_json": tree_json})
@@ -117,8 +117,8 @@ def policy_experiment(
             settings = {"steps_per_run": steps, "candidates": candidates, "best": best, "select_episodes": select_episodes,
                         "tree_seeds": sorted(seed for _, method, seed, _ in runs if method == "tree_ddt"), "baseline_seeds": list(range(baseline_seeds)),
                         "finished_runs": f"{len(results)} of {len(runs)}"}
-            write_table(domain, summarize(results, domain, ceiling["value"]), results, settings, out, command, ceiling)
-            write_figure(domain, results, out, ceiling["value"], REACH)
+            write_table(domain, summarize(results, domain, yardsticks), results, settings, out, command)
+            write_figure(domain, results, out, yardsticks, REACH)
 
         try:
             run_jobs(jobs, record, ray=ray, on_start=started, processes=workers)

@@ -8,7 +8,8 @@ the same step budget. Columns, median ± standard error (std / sqrt(runs)) acros
 - the paper's: rolling mean of training episode reward (window ``Knobs.rolling_window``),
   *initial* = the first full window, *best* = the highest rolling mean;
 - sample efficiency: steps until the rolling reward, and until the policy the method hands
-  back (probed at every checkpoint), first reach ``REACH`` of the ceiling (``table_ceiling``);
+  back (probed at every checkpoint), first reach ``REACH`` of the way from the floor (uniform
+  random) to the ceiling (``table_yardsticks``);
 - what a user gets back: PPO's last handed-back policy, then (DDT methods) the kept best
   checkpoint tree and the polished tree, each reported separately, scored as ``optimize``
   scores them (exact on taxi, common sampled scenes on highway);
@@ -28,19 +29,19 @@ from typing import Callable, Optional
 import numpy as np
 
 from nl2policy.language.corpus import load_corpus
-from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn
+from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn, tree_batch_act_fn
 from nl2policy.policy.keep_best import tree_from_json, tree_scorer
 from nl2policy.policy.optimize import EVAL_SEED, checkpoint_tree_score, rolling_mean, train_checkpointed, write_curve
 from nl2policy.policy.polish import can_polish, polish_any
-from nl2policy.policy.rollout import evaluate, tree_policy
+from nl2policy.policy.rollout import evaluate, evaluate_batched, evaluate_batched_many, tree_policy
 from nl2policy.policy.sb3_policy import METHODS, action_probs_fn, actor_ddt, make_ppo, soft_act_fn
 from nl2policy.trees import parse_tree, tree_to_json
 from nl2policy.domains import get_domain
 
 LABEL = {"tree_ddt": "tree-initialized DDT", "random_ddt": "random DDT (8 leaves)", "mlp": "MLP (3 layers)"}
-CHECKPOINTS = 20  # probes per run: the resolution of "steps to 90 % of the ceiling" on the handed-back policy
+CHECKPOINTS = 20  # probes per run: the resolution of "steps to 90 %" on the handed-back policy
 PROBE_EPISODES = 500  # fast-sim scenes per probe where there is no exact model (common to all runs)
-REACH = 0.9  # the issue's sample-efficiency level: steps until 90 % of the ceiling
+REACH = 0.9  # the issue's sample-efficiency level: steps until 90 % of the way from the floor to the ceiling
 
 
 def distinct_policies(domain: str) -> list[tuple[dict, int]]:
@@ -64,7 +65,9 @@ def distinct_policies(domain: str) -> list[tuple[dict, int]]:
 
 def select_trees(domain: str, candidates: int, best: int, episodes: int, seed: int, out: Path) -> list[dict]:
     """The `best` of the `candidates` most frequent distinct corpus policies, ranked by mean
-    return over `episodes` episodes (with an exact model, taxi: by the exact expected return). Cached in out."""
+    return over `episodes` episodes: of the fast simulator where the domain has one (highway: its
+    twin, all side by side), else of the reference env; with an exact model (taxi), by the exact
+    expected return. Cached in out."""
     path = out / "selected_trees.json"
     if path.is_file():
         return json.loads(path.read_text())["selected"]
@@ -72,7 +75,10 @@ def select_trees(domain: str, candidates: int, best: int, episodes: int, seed: i
     ranked = []
     for tree_json, count in distinct_policies(domain)[:candidates]:
         tree = parse_tree(tree_json, vocab)
-        ev = evaluate(domain, tree_policy(domain, tree), episodes, seed)
+        if get_domain(domain).train_env_id is not None:
+            ev = evaluate_batched(domain, tree_batch_act_fn(domain, tree), episodes, seed)
+        else:
+            ev = evaluate(domain, tree_policy(domain, tree), episodes, seed)
         entry = {"tree": tree_json, "count": count, "mean_return": ev.mean_return, "stderr": ev.stderr}
         if exact is not None:
             entry["exact_return"] = exact.expected_return(tree_act_fn(domain, tree))
@@ -80,43 +86,64 @@ def select_trees(domain: str, candidates: int, best: int, episodes: int, seed: i
     ranked.sort(key=lambda r: -r.get("exact_return", r["mean_return"]))
     out.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps({"episodes": episodes, "seed": seed, "grouped_by": "distinct policy (Domain.same_policy)",
+                                "env": get_domain(domain).train_env_id or get_domain(domain).env_id,
                                 "ranked_by": "exact_return" if exact is not None else "mean_return",
                                 "candidates": ranked, "selected": ranked[:best]}, indent=2))
     return ranked[:best]
 
 
-def table_ceiling(domain: str, root: Path) -> dict:
-    """The yardstick of Table 2's "steps to 90 %" column, cached in `root`/ceiling.json.
+def table_yardsticks(domain: str, root: Path) -> dict:
+    """Table 2's yardsticks, cached in `root`/yardsticks.json: the ceiling, the floor, and the
+    best policy that ignores the state.
 
-    With an exact model (taxi): the best stationary policy on the features, exactly (the
-    issue's bar for the MLP's plateau; the optimum sees the tick, which no method sees). Else
-    (highway): the best distinct corpus policy on the probe's scenes (``PROBE_EPISODES`` fast-sim
-    episodes from ``EVAL_SEED``), the same scenes every probe uses, so the two compare."""
-    path = root / "ceiling.json"
+    Ceiling: with an exact model (taxi), the best stationary policy on the features, exactly
+    (the issue's bar for the MLP's plateau; the optimum sees the tick, which no method sees);
+    else (highway), the best distinct corpus policy. Floor: the uniform random policy. Both are
+    scored as the probes score (exact, or on the probe's ``PROBE_EPISODES`` fast-sim scenes
+    from ``EVAL_SEED``), so every number compares. Scores in Table 2 are normalized between
+    them (0 = random, 1 = ceiling), as RL benchmarks normalize: on highway the state-blind
+    "always slower" already reaches 93 % of the best corpus tree's raw return, so raw
+    percentages flatter every method (measured 2026-12-03, 500 twin scenes)."""
+    path = root / "yardsticks.json"
     if path.is_file():
         return json.loads(path.read_text())
     d = get_domain(domain)
+    n = len(d.actions)
+    uniform = lambda X: np.full((len(np.atleast_2d(X)), n), 1.0 / n)  # noqa: E731
     if d.exact is not None:
         from nl2policy.policy.taxi_ceilings import best_stationary_policy
 
-        found = best_stationary_policy(d.exact.tables())
-        entry = {"value": found.value, "what": "best stationary policy on the features (exact)"}
+        ceiling = {"value": best_stationary_policy(d.exact.tables()).value,
+                   "what": "best stationary policy on the features (exact)"}
+        floor = float(d.exact.expected_return_mixed(uniform))
+        constant = [float(d.exact.expected_return(lambda x, a=a: a)) for a in range(n)]
+        scored_by = "exact"
     else:
-        from nl2policy.policy.convert import tree_batch_act_fn
-        from nl2policy.policy.rollout import evaluate_batched_many
-
         trees = [parse_tree(t, d.vocab) for t, _ in distinct_policies(domain)]
         means = []
         for k in range(0, len(trees), 8):  # 8 x 500 scenes a batch keeps memory small
             batch = [tree_batch_act_fn(domain, t) for t in trees[k:k + 8]]
             means += [e.mean_return for e in evaluate_batched_many(domain, batch, PROBE_EPISODES, EVAL_SEED)]
         best = int(np.argmax(means))
-        entry = {"value": float(means[best]), "tree": tree_to_json(trees[best]),
-                 "what": f"best of {len(trees)} distinct corpus policies, {PROBE_EPISODES} {d.train_env_id} "
-                         f"episodes from seed {EVAL_SEED}"}
+        ceiling = {"value": float(means[best]), "tree": tree_to_json(trees[best]),
+                   "what": f"the best of {len(trees)} distinct corpus policies"}
+        rng = np.random.default_rng(EVAL_SEED)
+        acts = [lambda x, a=a: np.full(len(x), a) for a in range(n)] + [lambda x: rng.integers(n, size=len(x))]
+        *constant, floor = [e.mean_return for e in evaluate_batched_many(domain, acts, PROBE_EPISODES, EVAL_SEED)]
+        scored_by = f"{PROBE_EPISODES} {d.train_env_id} episodes from seed {EVAL_SEED}"
+    k = int(np.argmax(constant))
+    entry = {"ceiling": ceiling, "floor": {"value": floor, "what": "uniform random actions"},
+             "constant": {"value": constant[k], "what": f"always {d.actions[k]} (the best state-blind policy)"},
+             "scored_by": scored_by}
     root.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(entry, indent=2))
     return entry
+
+
+def normalized(value: float, yardsticks: dict) -> float:
+    """`value` on the scale 0 = the floor (uniform random), 1 = the ceiling."""
+    low, high = yardsticks["floor"]["value"], yardsticks["ceiling"]["value"]
+    return (value - low) / (high - low)
 
 
 def policy_probe(domain: str, method: str) -> Optional[Callable]:
@@ -140,8 +167,6 @@ def policy_probe(domain: str, method: str) -> Optional[Callable]:
         return exact_probe
     if d.train_env_id is None:
         return None
-    from nl2policy.policy.convert import tree_batch_act_fn
-    from nl2policy.policy.rollout import evaluate_batched_many
 
     def sampled_probe(model) -> dict:
         probs = action_probs_fn(model)
@@ -232,10 +257,12 @@ def _reach(steps: list[Optional[int]]) -> dict:
             "runs": len(steps), "values": steps}
 
 
-def summarize(results: list[dict], domain: str, ceiling: float, level: float = REACH) -> dict:
+def summarize(results: list[dict], domain: str, yardsticks: dict, level: float = REACH) -> dict:
     """Table 2's numbers per method (median ± standard error across runs) from the runs'
-    result.json records; `ceiling` is ``table_ceiling``'s value."""
-    table: dict = {"ceiling": ceiling, "reach_level": level}
+    result.json records; steps to `level` on the normalized scale of ``table_yardsticks``."""
+    low, high = yardsticks["floor"]["value"], yardsticks["ceiling"]["value"]
+    target = low + level * (high - low)
+    table: dict = {"yardsticks": yardsticks, "reach_level": level, "reach_return": target}
     for method in METHODS:
         rows = [r for r in results if r["method"] == method]
         if not rows:
@@ -244,10 +271,10 @@ def summarize(results: list[dict], domain: str, ceiling: float, level: float = R
         entry: dict = {"runs": len(rows)}
         for key in ("initial", "best", "final"):
             entry[key] = _stats([r[key] for r in rows])
-        entry["steps_to_reach_rolling"] = _reach([steps_to(r["curve"][window - 1:], level * ceiling) for r in rows])
+        entry["steps_to_reach_rolling"] = _reach([steps_to(r["curve"][window - 1:], target) for r in rows])
         if rows[0].get("probes"):
-            entry["steps_to_reach_policy"] = _reach([steps_to([(p["step"], p["policy"]) for p in r["probes"]],
-                                                               level * ceiling) for r in rows])
+            entry["steps_to_reach_policy"] = _reach([steps_to([(p["step"], p["policy"]) for p in r["probes"]], target)
+                                                     for r in rows])
             entry["last_policy"] = _stats([r["probes"][-1]["policy"] for r in rows])
             entry["soft_minus_discrete"] = {**_stats([r["soft_minus_discrete"] for r in rows]),
                                             "values": [r["soft_minus_discrete"] for r in rows]}

@@ -9,15 +9,15 @@ from typing import Optional
 
 import numpy as np
 
-from nl2policy.policy.experiment import LABEL
+from nl2policy.policy.experiment import LABEL, normalized
 from nl2policy.policy.sb3_policy import METHODS
 from nl2policy.report import provenance
 
 
-def _cell(stats: Optional[dict], ceiling: float) -> str:
+def _cell(stats: Optional[dict], yardsticks: dict) -> str:
     if not stats:
         return "-"
-    return f"{stats['median']:.3f} ± {stats['stderr']:.3f} ({100 * stats['median'] / ceiling:.0f}%)"
+    return f"{stats['median']:.3f} ± {stats['stderr']:.3f} ({100 * normalized(stats['median'], yardsticks):.0f}%)"
 
 
 def _reach_cell(reach: Optional[dict]) -> str:
@@ -31,39 +31,41 @@ def _gap_cell(gap: Optional[dict]) -> str:
     return "-" if not gap else f"{gap['median']:+.3f}"
 
 
-def write_table(domain: str, table: dict, results: list[dict], settings: dict, out: Path, command: str,
-                ceiling: dict) -> Path:
+def write_table(domain: str, table: dict, results: list[dict], settings: dict, out: Path, command: str) -> Path:
     """table2_<domain>.md: the table a reader needs, on one screen; table2_<domain>_runs.md: every run."""
     meta = provenance(command)
-    window, c, level = results[0]["window"], table["ceiling"], table["reach_level"]
-    scored = results[0].get("probe_scored_by", "?")
+    y, level = table["yardsticks"], table["reach_level"]
+    window = results[0]["window"]
+    pct = f"{100 * level:.0f}%"
     lines = [f"# Table 2 ({domain}): PPO from a tree-initialized DDT vs baselines", "",
-             f"Made by: `{command}`  ", f"On: {meta['made']}  ", f"Settings: {json.dumps(settings)}  ",
-             f"Ceiling: {c:.3f}, {ceiling['what']}", "",
-             "| method | runs | initial | best | steps to "
-             f"{100 * level:.0f}%: rolling | steps to {100 * level:.0f}%: handed back | handed back, last | "
-             "kept tree | + polish | soft - discrete |",
+             f"Made by: `{command}`  ", f"On: {meta['made']}  ", f"Settings: {json.dumps(settings)}", "",
+             f"| method | runs | initial | best | steps to {pct}: rolling | steps to {pct}: handed back | "
+             "handed back, last | kept tree | + polish | soft - discrete |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for method in METHODS:
         if method not in table:
             continue
         e = table[method]
-        lines.append(f"| {LABEL[method]} | {e['runs']} | {_cell(e['initial'], c)} | {_cell(e['best'], c)} | "
+        lines.append(f"| {LABEL[method]} | {e['runs']} | {_cell(e['initial'], y)} | {_cell(e['best'], y)} | "
                      f"{_reach_cell(e['steps_to_reach_rolling'])} | {_reach_cell(e.get('steps_to_reach_policy'))} | "
-                     f"{_cell(e.get('last_policy'), c)} | {_cell(e.get('kept_score'), c)} | "
-                     f"{_cell(e.get('polished_score'), c)} | {_gap_cell(e.get('soft_minus_discrete'))} |")
+                     f"{_cell(e.get('last_policy'), y)} | {_cell(e.get('kept_score'), y)} | "
+                     f"{_cell(e.get('polished_score'), y)} | {_gap_cell(e.get('soft_minus_discrete'))} |")
+    for key in ("ceiling", "constant", "floor"):
+        lines.append(f"| *{y[key]['what']}* | | | | | | {y[key]['value']:.3f} ({100 * normalized(y[key]['value'], y):.0f}%)"
+                     " | | | |")
     tree_rows = table.get("tree_ddt", {})
-    lines += ["", f"Cells: median ± standard error across runs (% of the ceiling). Initial and best: the paper's columns, "
-                  f"the rolling mean of training episode reward over {window} episodes (initial = the first full window, "
-                  "best = the highest). Steps to "
-                  f"{100 * level:.0f}%: the first step at which the rolling reward, or the policy the method hands back "
-                  "(DDT: its discretized tree; MLP: its greedy actions, probed at every checkpoint), reaches "
-                  f"{100 * level:.0f}% of the ceiling; the median counts a run that never does as infinitely slow "
-                  "(in brackets: runs that did). Handed back, last: that policy at the end of training; kept tree: "
-                  "the best of the start tree and every checkpoint's discretized tree; + polish: the local search "
-                  "from the kept tree (`optimize` returns the better of the two). Soft - discrete: the soft policy "
-                  f"PPO trained minus the policy handed back, at the end. Returns of the handed-back policies: {scored}; "
-                  f"kept and polished trees: {results[0].get('scored_by', '?')} (on highway, scenes apart from the probe's)."]
+    lines += ["", f"Cells: median ± standard error across runs; in brackets, the normalized score: 0% = uniform random "
+                  "actions, 100% = the ceiling (the italic rows, scored "
+                  f"{y['scored_by']}). Initial and best: the paper's columns, the rolling mean of training episode "
+                  f"reward over {window} episodes (initial = the first full window, best = the highest). Steps to "
+                  f"{pct}: the first step at which the rolling reward, or the policy the method hands back (DDT: its "
+                  "discretized tree; MLP: its greedy actions; probed at step 0 and every checkpoint), reaches a "
+                  f"normalized {pct} (a return of {table['reach_return']:.3f}); the median counts a run that never "
+                  "does as infinitely slow (in brackets: runs that did). Handed back, last: that policy at the end of "
+                  "training; kept tree: the best of the start tree and every checkpoint's discretized tree; + polish: "
+                  "the local search from the kept tree (`optimize` returns the better of the two). Soft - discrete: "
+                  "the soft policy PPO trained minus the policy handed back, at the end. Kept and polished trees are "
+                  f"scored as `optimize` scores them: {results[0].get('scored_by', '?')}."]
     for key, what in (("kept_score_gain", "kept tree"), ("polished_score_gain", "polished tree")):
         gain = tree_rows.get(key)
         if gain:
@@ -77,8 +79,8 @@ def write_table(domain: str, table: dict, results: list[dict], settings: dict, o
     md.write_text("\n".join(lines) + "\n")
     write_runs(domain, results, out, command)
     slim = [{k: v for k, v in r.items() if k != "curve"} for r in results]
-    (out / f"table2_{domain}.json").write_text(json.dumps({"meta": meta, "settings": settings, "ceiling": ceiling,
-                                                           "table": table, "runs": slim}, indent=2))
+    (out / f"table2_{domain}.json").write_text(json.dumps({"meta": meta, "settings": settings, "table": table,
+                                                           "runs": slim}, indent=2))
     return md
 
 
@@ -112,7 +114,7 @@ def _band(curves: list[list], grid: np.ndarray) -> tuple[np.ndarray, np.ndarray,
                 np.nanpercentile(interp, 75, axis=0))
 
 
-def write_figure(domain: str, results: list[dict], out: Path, ceiling: Optional[float] = None,
+def write_figure(domain: str, results: list[dict], out: Path, yardsticks: Optional[dict] = None,
                  level: float = 0.9) -> Path:
     """curves_<domain>.png: the rolling training reward and (where probed) the return of the
     policy each method hands back, against env steps; median and interquartile band per method."""
@@ -136,9 +138,12 @@ def write_figure(domain: str, results: list[dict], out: Path, ceiling: Optional[
             median, low, high = _band(curves, grid)
             ax.plot(grid, median, label=f"{LABEL[method]} (median of {len(curves)})")
             ax.fill_between(grid, low, high, alpha=0.15)
-        if ceiling is not None:
-            ax.axhline(ceiling, color="black", lw=0.8, ls="--", label="ceiling")
-            ax.axhline(level * ceiling, color="gray", lw=0.8, ls=":", label=f"{100 * level:.0f}% of the ceiling")
+        if yardsticks is not None:
+            low, high = yardsticks["floor"]["value"], yardsticks["ceiling"]["value"]
+            ax.axhline(high, color="black", lw=0.8, ls="--", label="ceiling")
+            ax.axhline(low + level * (high - low), color="gray", lw=0.8, ls=":", label=f"normalized {100 * level:.0f}%")
+            ax.axhline(yardsticks["constant"]["value"], color="tab:red", lw=0.8, ls="-.",
+                       label=yardsticks["constant"]["what"].split(" (")[0])
         ax.set_xlabel("env steps")
         ax.set_ylabel(ylabel, fontsize=8)
         ax.legend(fontsize=7)
