@@ -117,7 +117,6 @@ def table_yardsticks(domain: str, root: Path) -> dict:
                    "what": "best stationary policy on the features (exact)"}
         floor = float(d.exact.expected_return_mixed(uniform))
         constant = [float(d.exact.expected_return(lambda x, a=a: a)) for a in range(n)]
-        scored_by = "exact"
     else:
         trees = [parse_tree(t, d.vocab) for t, _ in distinct_policies(domain)]
         means = []
@@ -130,14 +129,19 @@ def table_yardsticks(domain: str, root: Path) -> dict:
         rng = np.random.default_rng(EVAL_SEED)
         acts = [lambda x, a=a: np.full(len(x), a) for a in range(n)] + [lambda x: rng.integers(n, size=len(x))]
         *constant, floor = [e.mean_return for e in evaluate_batched_many(domain, acts, PROBE_EPISODES, EVAL_SEED)]
-        scored_by = f"{PROBE_EPISODES} {d.train_env_id} episodes from seed {EVAL_SEED}"
     k = int(np.argmax(constant))
     entry = {"ceiling": ceiling, "floor": {"value": floor, "what": "uniform random actions"},
              "constant": {"value": constant[k], "what": f"always {d.actions[k]} (the best state-blind policy)"},
-             "scored_by": scored_by}
+             "scored_by": probe_rule(domain)}
     root.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(entry, indent=2))
     return entry
+
+
+def probe_rule(domain: str) -> str:
+    """How ``policy_probe`` and ``table_yardsticks`` score a policy, in words."""
+    d = get_domain(domain)
+    return "exact" if d.exact is not None else f"{PROBE_EPISODES} {d.train_env_id} episodes from seed {EVAL_SEED}"
 
 
 def normalized(value: float, yardsticks: dict) -> float:
@@ -192,7 +196,8 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
         return json.loads(result_path.read_text())
     d = get_domain(domain)
     tree = parse_tree(tree_json, d.vocab) if tree_json else None
-    score = checkpoint_tree_score(domain, sampled=True) if method != "mlp" else None
+    scorer, rule = tree_scorer(domain)  # one scorer: its cache of sampled scores serves every checkpoint and the start
+    score = checkpoint_tree_score(domain, True, scorer) if method != "mlp" else None
     model, episodes, seconds, best, probes = train_checkpointed(
         lambda: make_ppo(domain, method, seed, tree), domain, seed, steps, run_dir, progress, score,
         probe=policy_probe(domain, method), checkpoints=CHECKPOINTS)
@@ -204,15 +209,13 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
               "seconds": seconds, "episodes": len(episodes), "window": window, "tree": tree_json,
               "initial": float(full[0]), "best": float(full.max()), "final": float(rolling[-1]),
               "curve": [[s, float(m)] for (s, _), m in zip(episodes, rolling)], "probes": probes,
-              "probe_scored_by": "exact model" if d.exact is not None else
-                                 f"{PROBE_EPISODES} {d.train_env_id} episodes from seed {EVAL_SEED}"}
+              "probe_scored_by": probe_rule(domain)}
     if probes:  # PPO's own discretization loss: the handed-back policy minus the soft one, at the end
         result["soft_minus_discrete"] = probes[-1]["soft"] - probes[-1]["policy"]
     if method != "mlp":  # what a user gets back: PPO's last tree, the kept tree, the polished one
         last = ddt_to_tree(domain, actor_ddt(model))
         result.update({"last_tree": tree_to_json(last), "last_tree_has_raw_tests": has_raw_tests(last),
                        "kept_tree": best["tree"], "kept_score": best["score"], "kept_step": best["step"]})
-        scorer = tree_scorer(domain)[0]
         if tree is not None:
             result["initial_tree_score"] = scorer(tree)
         kept = tree_from_json(best["tree"])
@@ -220,7 +223,7 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
             polished = polish_any(domain, kept)
             result.update({"polished_tree": tree_to_json(polished.tree), "polished_score": polished.value,
                            "polish_seconds": polished.seconds})
-        result["scored_by"] = tree_scorer(domain)[1]
+        result["scored_by"] = rule
     result_path.write_text(json.dumps(result))
     (run_dir / "checkpoint.zip").unlink(missing_ok=True)  # finished: result.json is the record
     return result
