@@ -64,9 +64,9 @@ def test_user_model_takes_precedence_over_the_shipped_one(empty_home):
 def test_the_shipped_version_is_one_small_recipe_file_and_a_bad_setting_is_named(tmp_path, monkeypatch):
     from nl2policy.language.models import config
 
-    assert config.DEFAULT_MODEL == "v2" and config.MODELS["v2"] == config.load_recipe("v2")
-    assert len((config.RECIPES / "v2.toml").read_text().splitlines()) < 40
-    assert config.MODELS["v2"].findings_cost > 0  # the learned findings, no pattern check
+    assert config.DEFAULT_MODEL == "v3" and config.MODELS["v3"] == config.load_recipe("v3")
+    assert len((config.RECIPES / "v3.toml").read_text().splitlines()) < 40
+    assert config.MODELS["v3"].findings_cost > 0  # the learned findings, no pattern check
     (tmp_path / "v9.toml").write_text('encoder = "flat"\ndecoder = "tree"\nminilm = true\nsynthetic = 0\nbeam_width = 3\n')
     monkeypatch.setattr(config, "RECIPES", tmp_path)
     with pytest.raises(ValueError, match="unknown settings beam_width"):

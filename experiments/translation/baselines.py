@@ -16,9 +16,8 @@ from __future__ import annotations
 import torch
 import torch.nn as nn
 
-from dataclasses import replace
 
-from nl2policy.language.models.config import MODELS, ModelConfig, load_recipe
+from nl2policy.language.models.config import MODELS, ModelConfig
 from nl2policy.language.models.network import ARCHITECTURES, Batch, Translator, _bigru_packed, _masked_mean
 
 
@@ -104,7 +103,4 @@ BASELINES: dict[str, ModelConfig] = {
     "seq2tree-minilm-synth-x4": ModelConfig("flat", "tree", True, 200, minilm_layers=6, ensemble=4,
                                             member_draws=True, beam=4),
 }
-# issue 26 probe: five times the synthetic random-tree pairs (trees sampled from the grammar,
-# arXiv 2401.09815), against v2 on leave-trees-out, where compositional errors show
-BASELINES["v2-synth1000"] = replace(load_recipe("v2"), synthetic=1000)
 MODELS.update(BASELINES)

@@ -48,7 +48,7 @@ MODELS: dict[str, ModelConfig] = {
 """The product's configs: the shipped version (DEFAULT_MODEL, from its recipe) and the smoke
 model. The lab registers the paper's four and the default's parts (experiments/translation/baselines.py)."""
 RECIPES = Path(__file__).resolve().parent.parent / "recipes"
-"""The shipped translator's recipes, one small file per version (recipes/v2.toml)."""
+"""The shipped translator's recipes, one small file per version (recipes/v3.toml)."""
 
 
 def load_recipe(version: str) -> ModelConfig:
@@ -60,6 +60,6 @@ def load_recipe(version: str) -> ModelConfig:
     return ModelConfig(**data)
 
 
-DEFAULT_MODEL = "v2"
-"""The shipped translator's version: its models are named DOMAIN-VERSION (taxi-v2)."""
+DEFAULT_MODEL = "v3"
+"""The shipped translator's version: its models are named DOMAIN-VERSION (taxi-v3)."""
 MODELS[DEFAULT_MODEL] = load_recipe(DEFAULT_MODEL)
