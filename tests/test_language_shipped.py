@@ -1,7 +1,5 @@
 """The shipped default translators: a fresh install translates without training first."""
 
-import time
-
 import pytest
 
 from nl2policy.domains import DOMAINS, get_domain
@@ -43,9 +41,7 @@ def test_translate_uses_the_shipped_model_without_training(domain, empty_home, m
     monkeypatch.setattr(tr, "train_default", no_training)
     assert tr.find_model(domain) == tr.SHIPPED_DIR / f"{domain}-{DEFAULT_MODEL}.pt"
     specs = load_corpus(domain)
-    start = time.perf_counter()
-    result = tr.translate(domain, specs[0].description)
-    assert time.perf_counter() - start < 30  # loading + one translation; no training
+    result = tr.translate(domain, specs[0].description)  # no training: train_default raises above
     validate(result.tree, get_domain(domain).vocab)
     assert 0.0 <= result.confidence <= 1.0
     # the shipped model was trained on the corpus: it must reproduce most of a few training trees
