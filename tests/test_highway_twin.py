@@ -14,7 +14,8 @@ from stable_baselines3.common.vec_env import VecMonitor
 
 from nl2policy.domains import get_domain
 from nl2policy.domains.highway import META_ACTION, HighwayFeatures
-from nl2policy.domains.highway_twin import HighwayTwin, _RoadOrder, copy_scene_to
+from nl2policy.domains.highway_geometry import RoadOrder
+from nl2policy.domains.highway_twin import HighwayTwin, copy_scene_to
 from nl2policy.domains.highway_vec import HighwayTwinVectorEnv, twin_episodes
 from nl2policy.policy.vec_env import SB3VecEnv
 from nl2policy.trees import parse_tree
@@ -110,7 +111,7 @@ def test_neighbour_search_matches_all_pairs():
     rng = np.random.default_rng(0)
     x = rng.uniform(0, 500, size=(40, 9))
     mask = rng.random((40, 9)) < 0.5
-    order = _RoadOrder(x)
+    order = RoadOrder(x)
     ahead, behind = order.ahead(mask), order.behind(mask)
     for n in range(40):
         for i in range(9):

@@ -62,12 +62,13 @@ from typing import Any, Optional
 
 import numpy as np
 from highway_env.envs.highway_env import HighwayEnvFast
-from highway_env.road.lane import AbstractLane, StraightLane
+from highway_env.road.lane import AbstractLane
 from highway_env.vehicle.behavior import IDMVehicle
-from highway_env.vehicle.controller import ControlledVehicle, MDPVehicle
-from highway_env.vehicle.kinematics import Vehicle
 
 from nl2policy.domains.highway import BASE_CONFIG, RANGE, SPEED_SCALE
+from nl2policy.domains.highway_geometry import (
+    DIAGONAL, EGO_SPEED, IDM, KP_A, KP_HEADING, KP_LATERAL, LANE_WIDTH, LENGTH, MAX_SPEED, MAX_STEERING, MIN_SPEED,
+    ROAD_LENGTH, TARGET_SPEEDS, RoadOrder, not_zero, separating_axes, wrap_to_pi)
 
 # highway-env's DiscreteMetaAction labels by index.
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
@@ -121,102 +122,6 @@ class TwinConfig:
         )
 
 
-# highway-env's constants, by the class that owns them.
-LENGTH, WIDTH = Vehicle.LENGTH, Vehicle.WIDTH
-DIAGONAL = float(np.sqrt(LENGTH**2 + WIDTH**2))
-MAX_SPEED, MIN_SPEED = Vehicle.MAX_SPEED, Vehicle.MIN_SPEED
-LANE_WIDTH = StraightLane.DEFAULT_WIDTH
-ROAD_LENGTH = 10000.0  # RoadNetwork.straight_road_network's default length
-KP_A, KP_HEADING, KP_LATERAL = ControlledVehicle.KP_A, ControlledVehicle.KP_HEADING, ControlledVehicle.KP_LATERAL
-MAX_STEERING = ControlledVehicle.MAX_STEERING_ANGLE
-TARGET_SPEEDS = np.asarray(MDPVehicle.DEFAULT_TARGET_SPEEDS, dtype=np.float64)
-EGO_SPEED = 25.0  # HighwayEnv._create_vehicles: Vehicle.create_random(road, speed=25.0, ...)
-IDM = IDMVehicle
-
-
-def _not_zero(x: np.ndarray, eps: float = 1e-2) -> np.ndarray:
-    """highway_env.utils.not_zero, elementwise."""
-    return np.where(np.abs(x) > eps, x, np.where(x >= 0, eps, -eps))
-
-
-def _wrap_to_pi(x: np.ndarray) -> np.ndarray:
-    return ((x + np.pi) % (2 * np.pi)) - np.pi
-
-
-def _separating_axes(a: tuple, b: tuple, dt: float) -> tuple[np.ndarray, ...]:
-    """utils.are_polygons_intersecting for pairs of car rectangles a, b = (x, y, heading, speed),
-    each a 1-D array over pairs: (intersecting, will intersect within dt, translation x, y).
-
-    The axes are each rectangle's four edge normals in the polygon's order, the ego's first: the
-    translation is along the first axis of least |distance|, as there."""
-    ax_, ay_, ah, aspeed = a
-    bx, by, bh, bspeed = b
-    ac, as_, bc, bs = np.cos(ah), np.sin(ah), np.cos(bh), np.sin(bh)
-    sweep_x, sweep_y = (aspeed * ac - bspeed * bc) * dt, (aspeed * as_ - bspeed * bs) * dt
-    centre_dx, centre_dy = ax_ - bx, ay_ - by
-
-    def project(cx, cy, c, s, nx, ny):
-        centre = cx * nx + cy * ny
-        extent = LENGTH / 2 * np.abs(c * nx + s * ny) + WIDTH / 2 * np.abs(-s * nx + c * ny)
-        return centre - extent, centre + extent
-
-    def interval_distance(min_a, max_a, min_b, max_b):
-        return np.where(min_a < min_b, min_b - max_a, min_a - max_b)
-
-    intersecting = np.ones(ax_.shape, dtype=bool)
-    will = np.ones(ax_.shape, dtype=bool)
-    best = np.full(ax_.shape, np.inf)
-    axis_x, axis_y = np.zeros(ax_.shape), np.zeros(ax_.shape)
-    for c, s in ((ac, as_), (bc, bs)):
-        for nx, ny in ((-c, -s), (-s, c), (c, s), (s, -c)):
-            min_a, max_a = project(ax_, ay_, ac, as_, nx, ny)
-            min_b, max_b = project(bx, by, bc, bs, nx, ny)
-            intersecting &= interval_distance(min_a, max_a, min_b, max_b) <= 0
-            sweep = nx * sweep_x + ny * sweep_y
-            min_a, max_a = np.where(sweep < 0, min_a + sweep, min_a), np.where(sweep < 0, max_a, max_a + sweep)
-            distance = interval_distance(min_a, max_a, min_b, max_b)
-            will &= distance <= 0
-            closer = np.abs(distance) < best
-            best = np.where(closer, np.abs(distance), best)
-            sign = np.where(centre_dx * nx + centre_dy * ny > 0, 1.0, -1.0)
-            axis_x, axis_y = np.where(closer, sign * nx, axis_x), np.where(closer, sign * ny, axis_y)
-    return intersecting, will, best * axis_x, best * axis_y
-
-
-class _RoadOrder:
-    """The cars of each episode sorted by position along the road, to find for every car the
-    nearest car ahead or behind that meets a condition with one running min (or max) over the
-    sorted order: O(cars log cars) per episode, where comparing all pairs is O(cars^2)."""
-
-    def __init__(self, x: np.ndarray) -> None:
-        n, v = x.shape
-        self.v = v
-        self.rows = np.arange(n)[:, None]
-        self.order = np.argsort(x, axis=1, kind="stable")  # sorted position -> car
-        self.rank = np.empty_like(self.order)  # car -> sorted position
-        self.rank[self.rows, self.order] = np.arange(v)
-        self.order_padded = np.concatenate([self.order, np.full((n, 1), v)], axis=1)
-        self.positions = np.arange(v)
-        self.none = np.full((n, 1), v)
-
-    def _to_cars(self, position: np.ndarray) -> np.ndarray:
-        """For each car (by sorted position) the car at `position` (v = none), back in car order."""
-        return self.order_padded[self.rows, position][self.rows, self.rank]
-
-    def ahead(self, mask: np.ndarray) -> np.ndarray:
-        """For each car, the nearest car strictly after it in the order with `mask` set."""
-        on = mask[self.rows, self.order]
-        nearest = np.minimum.accumulate(np.where(on, self.positions, self.v)[:, ::-1], axis=1)[:, ::-1]
-        return self._to_cars(np.concatenate([nearest[:, 1:], self.none], axis=1))
-
-    def behind(self, mask: np.ndarray) -> np.ndarray:
-        """For each car, the nearest car strictly before it in the order with `mask` set."""
-        on = mask[self.rows, self.order]
-        nearest = np.maximum.accumulate(np.where(on, self.positions, -1), axis=1)
-        nearest = np.concatenate([np.full_like(self.none, -1), nearest[:, :-1]], axis=1)
-        return self._to_cars(np.where(nearest < 0, self.v, nearest))
-
-
 class _Cars:
     """What IDM reads of a car, for every car plus a "no car" column (index v), gathered by
     index arrays with one flat take: built once a frame, not once a query."""
@@ -229,7 +134,7 @@ class _Cars:
         self.v = v
         self.base = np.arange(n)[:, None] * (v + 1)
         cos, sin = np.cos(twin.heading), np.sin(twin.heading)
-        target = np.abs(_not_zero(np.clip(twin.target_speed, 0, twin.config.speed_limit)))
+        target = np.abs(not_zero(np.clip(twin.target_speed, 0, twin.config.speed_limit)))
         table = np.zeros((len(self.FIELDS), n, v + 1))
         for k, values in enumerate((twin.x, twin.speed * cos, twin.speed * sin, twin.speed, target, cos, sin)):
             table[k, :, :v] = values
@@ -353,7 +258,7 @@ class HighwayTwin:
         self.time[idx] = 0
 
     # ----- neighbours, IDM and MOBIL ----------------------------------------------------------
-    def _lane_neighbours(self, order: "_RoadOrder") -> tuple[np.ndarray, np.ndarray]:
+    def _lane_neighbours(self, order: "RoadOrder") -> tuple[np.ndarray, np.ndarray]:
         """front[l, n, i] / rear[l, n, i]: the nearest car ahead of / behind car i among the cars
         on lane l (within half a lane plus 1 m of its centre: Lane.on_lane with margin 1), as
         ``Road.neighbour_vehicles(i, lane l)`` finds them; ``self.v`` where there is none."""
@@ -385,11 +290,11 @@ class HighwayTwin:
         else:
             e = cars.take(ego)
             accel = IDM.COMFORT_ACC_MAX * (1 - np.power(np.maximum(e[3], 0) / e[4], delta))
-        interaction = IDM.COMFORT_ACC_MAX * np.power(self._desired_gap(e, f) / _not_zero(f[0] - e[0]), 2)
+        interaction = IDM.COMFORT_ACC_MAX * np.power(self._desired_gap(e, f) / not_zero(f[0] - e[0]), 2)
         accel = np.where(front < self.v, accel - interaction, accel)
         return accel if ego is None else np.where(ego < self.v, accel, 0.0)
 
-    def _lane_changes(self, cars: _Cars, order: _RoadOrder, follow: np.ndarray, rear: np.ndarray) -> None:
+    def _lane_changes(self, cars: _Cars, order: RoadOrder, follow: np.ndarray, rear: np.ndarray) -> None:
         """IDMVehicle.change_lane_policy for every other car at once: abort a change that
         another merging car makes unsafe, else every LANE_CHANGE_DELAY ask MOBIL about the lane
         to the left, then to the right (a yes to the right wins)."""
@@ -436,10 +341,10 @@ class HighwayTwin:
         """ControlledVehicle.steering_control towards each car's target lane (straight lanes)."""
         lateral = self.y - self.target_lane * LANE_WIDTH
         lateral_speed = -KP_LATERAL * lateral
-        heading_command = np.arcsin(np.clip(lateral_speed / _not_zero(self.speed), -1, 1))
+        heading_command = np.arcsin(np.clip(lateral_speed / not_zero(self.speed), -1, 1))
         heading_ref = np.clip(heading_command, -np.pi / 4, np.pi / 4)
-        heading_rate = KP_HEADING * _wrap_to_pi(heading_ref - self.heading)
-        slip = np.arcsin(np.clip(LENGTH / 2 / _not_zero(self.speed) * heading_rate, -1, 1))
+        heading_rate = KP_HEADING * wrap_to_pi(heading_ref - self.heading)
+        slip = np.arcsin(np.clip(LENGTH / 2 / not_zero(self.speed) * heading_rate, -1, 1))
         return np.clip(np.arctan(2 * np.tan(slip)), -MAX_STEERING, MAX_STEERING)
 
     def _apply_meta_action(self, action: np.ndarray) -> None:
@@ -461,7 +366,7 @@ class HighwayTwin:
     def _frame(self, active: np.ndarray) -> None:
         """One simulation frame (Road.act, Road.step) for the episodes in `active`."""
         dt = self.config.dt
-        order, cars = _RoadOrder(self.x), _Cars(self)
+        order, cars = RoadOrder(self.x), _Cars(self)
         front, rear = self._lane_neighbours(order)
         # follow[l]: each car's IDM acceleration behind the car ahead of it on lane l
         follow = np.stack([self._idm(cars, None, front[lane], self.delta) for lane in range(self.config.lanes)])
@@ -516,7 +421,7 @@ class HighwayTwin:
             return
         env, car = np.nonzero(near)
         car = car + 1
-        intersecting, will, tx, ty = _separating_axes(
+        intersecting, will, tx, ty = separating_axes(
             (self.x[env, 0], self.y[env, 0], self.heading[env, 0], self.speed[env, 0]),
             (self.x[env, car], self.y[env, car], self.heading[env, car], self.speed[env, car]), dt)
         # The ego's impact is set by the last car (in list order) that will hit it; np.nonzero
