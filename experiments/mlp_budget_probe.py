@@ -1,0 +1,68 @@
+"""Where does the MLP baseline plateau? One PPO run of Table 2's MLP, probed as Table 2 probes it.
+
+Issue 27 asks Table 2 to give every method enough steps for the MLP to plateau. This runs the
+grid's own `run_one` for the MLP (same PPO settings, same probe: the greedy policy scored
+exactly on taxi, on ``PROBE_EPISODES`` common twin scenes on highway) for a long budget and
+writes the probes and the rolling training reward, so the table's budget is read off a curve
+and not guessed. Resumable (the run's checkpoint); `--summarize-only` writes the file from an
+unfinished run's state.json.
+
+    PYTHONPATH=src:. .venv/bin/python experiments/mlp_budget_probe.py --domain highway --steps 600000 \
+        --out results/policy/mlp_budget_highway
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from nl2policy.domains import get_domain
+from nl2policy.policy.experiment import probe_rule, run_one
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--domain", default="highway")
+    parser.add_argument("--steps", type=int, default=600_000)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--summarize-only", action="store_true", help="write the summary from the run as it stands")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    run_dir = args.out / "run"
+    started = time.time()
+    if not args.summarize_only:
+        run_one(args.domain, "mlp", args.seed, args.steps, run_dir, None)
+    record_path = run_dir / ("result.json" if (run_dir / "result.json").is_file() else "state.json")
+    record = json.loads(record_path.read_text())
+    window = get_domain(args.domain).knobs.rolling_window
+    if isinstance(record["episodes"], list):  # state.json: every episode's (step, reward)
+        steps = [s for s, _ in record["episodes"]]
+        rewards = [r for _, r in record["episodes"]]
+        rolling_at = [(steps[k], float(np.mean(rewards[k - window + 1:k + 1]))) for k in range(window - 1, len(steps))]
+    else:  # result.json: the rolling mean already, one point per episode
+        rolling_at = [(s, m) for s, m in record["curve"][window - 1:]]
+    lines = [f"# MLP budget probe ({args.domain})", "",
+             f"Made by: `PYTHONPATH=src:. .venv/bin/python experiments/mlp_budget_probe.py --domain {args.domain} "
+             f"--steps {args.steps} --seed {args.seed} --out {args.out}`" + (" (then `--summarize-only`)" if args.summarize_only else ""),
+             f"Run: {record['steps']} of {args.steps} steps ({'finished' if record_path.name == 'result.json' else 'stopped there'}), "
+             f"seed {args.seed}; probes scored: {probe_rule(args.domain)}", "",
+             f"| step | greedy policy (probe) | soft policy (probe) | rolling training reward ({window} episodes) |",
+             "|---:|---:|---:|---:|"]
+    for p in record["probes"]:
+        before = [m for s, m in rolling_at if s <= p["step"]]
+        rolling = f"{before[-1]:.3f}" if before else "-"
+        lines.append(f"| {p['step']} | {p['policy']:.3f} | {p['soft']:.3f} | {rolling} |")
+    lines += ["", f"Wall seconds of this invocation: {time.time() - started:.0f}"]
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "probe.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
