@@ -76,3 +76,22 @@ def test_sampled_probe_scores_the_start_tree_on_the_probe_scenes():
     assert probe["policy"] == own and probe["soft"] != own
     mlp = policy_probe("highway", "mlp")(make_ppo("highway", "mlp", 0))
     assert set(mlp) == {"policy", "soft"} and get_domain("highway").exact is None
+
+
+def test_the_paper_sentence_calls_a_method_level_only_within_two_standard_errors():
+    from nl2policy.policy.experiment_report import paper_comparison
+
+    def stats(median, stderr=0.1):
+        return {"median": median, "stderr": stderr, "mean": median}
+
+    yardsticks = {"floor": {"value": 0.0}, "ceiling": {"value": 10.0}}
+    reach = {"median": 0, "reached": 2, "runs": 2, "values": [0, None]}
+    table = {"yardsticks": yardsticks, "reach_level": 0.9,
+             "tree_ddt": {"initial": stats(6.0), "best": stats(9.0), "steps_to_reach_policy": reach},
+             "random_ddt": {"initial": stats(1.0), "best": stats(8.8)},  # 0.2 apart < 2 * 0.141: level
+             "mlp": {"initial": stats(1.0), "best": stats(9.5),  # 0.5 apart: below
+                     "steps_to_reach_policy": {"median": 45000, "reached": 3, "runs": 3, "values": [1, 2, 3]}}}
+    text = paper_comparison(table, 1000)
+    assert "is level with the random DDT (8 leaves) (88%)" in text and "below the MLP (3 layers) (95%)" in text
+    assert "from the first step in 1 of 2 runs" in text and "a median of 45k steps (3 of 3 runs ever do)" in text
+    assert paper_comparison({k: v for k, v in table.items() if k != "mlp"}, 1000) is None
