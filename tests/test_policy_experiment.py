@@ -95,3 +95,31 @@ def test_the_paper_sentence_calls_a_method_level_only_within_two_standard_errors
     assert "is level with the random DDT (8 leaves) (88%)" in text and "below the MLP (3 layers) (95%)" in text
     assert "from the first step in 1 of 2 runs" in text and "a median of 45k steps (3 of 3 runs ever do)" in text
     assert paper_comparison({k: v for k, v in table.items() if k != "mlp"}, 1000) is None
+
+
+def test_highway_trees_are_judged_on_the_probe_scenes_not_the_ones_that_chose_them():
+    """Keep-best and the polish choose on tree_scorer's scenes; Table 2 re-scores the start, kept
+    and polished trees on the probe's scenes, once (a finished run gains the scores when read)."""
+    from nl2policy.language.corpus import load_corpus
+    from nl2policy.policy.convert import tree_batch_act_fn
+    from nl2policy.policy.experiment import PROBE_EPISODES, judge_trees, summarize
+    from nl2policy.policy.keep_best import tree_scorer
+    from nl2policy.policy.optimize import EVAL_SEED
+    from nl2policy.policy.rollout import evaluate_batched
+    from nl2policy.trees import tree_to_json
+
+    specs = load_corpus("highway")
+    start, other = specs[0].tree, next(s.tree for s in specs if s.tree != specs[0].tree)
+    chosen_on = tree_scorer("highway")[0]
+    result = {"method": "tree_ddt", "tree": tree_to_json(start), "initial_tree_score": chosen_on(start),
+              "kept_tree": tree_to_json(start), "kept_score": chosen_on(start),
+              "polished_tree": tree_to_json(other), "polished_score": chosen_on(other)}
+    assert judge_trees("highway", result) and not judge_trees("highway", result)  # once
+    probe = {t: evaluate_batched("highway", tree_batch_act_fn("highway", t), PROBE_EPISODES, EVAL_SEED).mean_return
+             for t in (start, other)}
+    assert result["kept_judged"] == result["initial_tree_judged"] == probe[start]
+    assert result["polished_judged"] == probe[other] and result["kept_judged"] != result["kept_score"]
+    row = {**result, "window": 1, "curve": [[1, 0.0]], "initial": 0.0, "best": 0.0, "final": 0.0}
+    table = summarize([row], "highway", {"floor": {"value": 0.0}, "ceiling": {"value": 1.0}})
+    assert table["tree_ddt"]["polished_score"]["median"] == probe[other]
+    assert not judge_trees("taxi", {"method": "tree_ddt", "kept_tree": tree_to_json(load_corpus("taxi")[0].tree)})

@@ -9,7 +9,7 @@ from typing import Optional
 
 import numpy as np
 
-from nl2policy.policy.experiment import LABEL, normalized
+from nl2policy.policy.experiment import JUDGED, LABEL, normalized
 from nl2policy.policy.sb3_policy import METHODS
 from nl2policy.report import provenance
 
@@ -64,8 +64,12 @@ def write_table(domain: str, table: dict, results: list[dict], settings: dict, o
                   "does as infinitely slow (in brackets: runs that did). Handed back, last: that policy at the end of "
                   "training; kept tree: the best of the start tree and every checkpoint's discretized tree; + polish: "
                   "the local search from the kept tree (`optimize` returns the better of the two). Soft - discrete: "
-                  "the soft policy PPO trained minus the policy handed back, at the end. Kept and polished trees are "
-                  f"scored as `optimize` scores them: {results[0].get('scored_by', '?')}."]
+                  "the soft policy PPO trained minus the policy handed back, at the end. Start, kept and polished "
+                  "trees are scored "
+                  + (f"on the probe's scenes ({y['scored_by']}), not on those keep-best and the polish chose them on "
+                     f"({next(r['scored_by'] for r in results if 'scored_by' in r)}; `table2_{domain}_runs.md` has both)."
+                     if any("judged_by" in r for r in results) else
+                     f"as `optimize` scores them: {next((r['scored_by'] for r in results if 'scored_by' in r), '?')}.")]
     for key, what in (("kept_score_gain", "kept tree"), ("polished_score_gain", "polished tree")):
         gain = tree_rows.get(key)
         if gain:
@@ -132,13 +136,24 @@ def write_runs(domain: str, results: list[dict], out: Path, command: str) -> Pat
     def num(value: Optional[float], fmt: str = ".3f") -> str:
         return "-" if value is None else format(value, fmt)
 
+    judged = any("judged_by" in r for r in results)
     for r in results:
         name = r["method"] + (f" tree#{r['tree_rank']}" if "tree_rank" in r else "")
         last = r["probes"][-1]["policy"] if r.get("probes") else None
-        kept = f"{r['kept_score']:.3f} ({r['kept_step']})" if "kept_score" in r else "-"
+
+        def tree_cell(key: str) -> str:  # on the probe's scenes, and on the scenes the tree was chosen on
+            if key not in r:
+                return "-"
+            return f"{r[JUDGED[key]]:.3f} [{r[key]:.3f}]" if JUDGED[key] in r else f"{r[key]:.3f}"
+
+        kept = f"{tree_cell('kept_score')} ({r['kept_step']})" if "kept_score" in r else "-"
         lines.append(f"| {name} seed {r['seed']} | {r['initial']:.3f} | {r['best']:.3f} | "
-                     f"{num(r.get('initial_tree_score'))} | {num(last)} | {kept} | {num(r.get('polished_score'))} | "
+                     f"{tree_cell('initial_tree_score')} | {num(last)} | {kept} | {tree_cell('polished_score')} | "
                      f"{num(r.get('soft_minus_discrete'), '+.3f')} | {r['steps']} | {r['seconds']:.0f} |")
+    if judged:
+        lines += ["", f"Trees (start, kept, polished) are scored on the probe's scenes ({results[0]['probe_scored_by']}), "
+                      "like the handed-back policy; in brackets, on the scenes keep-best and the polish chose them on "
+                      f"({next(r['scored_by'] for r in results if 'scored_by' in r)}), where the choice flatters them."]
     path = out / f"table2_{domain}_runs.md"
     path.write_text("\n".join(lines) + "\n")
     return path
