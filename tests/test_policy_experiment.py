@@ -92,6 +92,7 @@ def test_the_paper_sentence_calls_a_method_level_only_within_two_standard_errors
              "mlp": {"initial": stats(1.0), "best": stats(9.5),  # 0.5 apart: below
                      "steps_to_reach_policy": {"median": 45000, "reached": 3, "runs": 3, "values": [1, 2, 3]}}}
     text = paper_comparison(table, 1000)
+    assert "initial rolling reward (normalized: 60%) is above the random DDT (8 leaves)'s (10%)" in text
     assert "is level with the random DDT (8 leaves) (88%)" in text and "below the MLP (3 layers) (95%)" in text
     assert "from the first step in 1 of 2 runs" in text and "a median of 45k steps (3 of 3 runs ever do)" in text
     assert paper_comparison({k: v for k, v in table.items() if k != "mlp"}, 1000) is None

@@ -111,7 +111,8 @@ def paper_comparison(table: dict, steps: Optional[int]) -> Optional[str]:
     def pct(stats: dict) -> str:
         return f"{100 * normalized(stats['median'], y):.0f}%"
 
-    initial = ", ".join(f"{LABEL[m]} {pct(table[m]['initial'])}" for m in others)
+    initial = "; ".join(f"{_versus(tree['initial'], table[m]['initial'])} the {LABEL[m]}'s ({pct(table[m]['initial'])})"
+                        for m in others)
     best = "; ".join(f"{_versus(tree['best'], table[m]['best'])} the {LABEL[m]} ({pct(table[m]['best'])})" for m in others)
     reach = tree["steps_to_reach_policy"]
     mlp_reach = table["mlp"].get("steps_to_reach_policy")
@@ -121,8 +122,8 @@ def paper_comparison(table: dict, steps: Optional[int]) -> Optional[str]:
                      f"({mlp_reach['reached']} of {mlp_reach['runs']} runs ever do)." if mlp_reach else "."))
     return (f"**Against the paper's Table 2.** Tambwekar et al. (RA-L 2023) state that PPO from a tree translated from "
             "language matches the RL baselines (abstract; their arXiv v1 said it outperforms them). Here, with "
-            f"{steps if steps is None else f'{steps:,}'} steps a run for every method, the tree-initialized DDT starts higher "
-            f"(initial rolling reward, normalized: {pct(tree['initial'])} against {initial}) and its best rolling reward "
+            f"{steps if steps is None else f'{steps:,}'} steps a run for every method, the tree-initialized DDT's initial "
+            f"rolling reward (normalized: {pct(tree['initial'])}) is {initial}, and its best rolling reward "
             f"({pct(tree['best'])}) is {best}; level means within two combined standard errors of the median. "
             + reach_text)
 
