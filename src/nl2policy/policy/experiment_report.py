@@ -183,8 +183,10 @@ def write_figure(domain: str, results: list[dict], out: Path, yardsticks: Option
     grid = np.linspace(0, max(r["steps"] for r in results), 200)
     panels = [("curve", f"rolling mean training reward ({results[0]['window']} episodes)")]
     if probed:
-        panels.append(("probes", f"return of the handed-back policy ({results[0].get('probe_scored_by', '')})"))
+        panels.append(("probes", "return of the handed-back policy"))
     for ax, (key, ylabel) in zip(axes[0], panels):
+        if key == "probes":  # how it is scored: a title, which has the width a long rule needs
+            ax.set_title(f"scored: {results[0].get('probe_scored_by', '')}", fontsize=9)
         for method in METHODS:
             curves = [r["curve"] if key == "curve" else [(p["step"], p["policy"]) for p in r["probes"]]
                       for r in results if r["method"] == method and r.get(key)]
