@@ -18,11 +18,11 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from nl2policy.domains import get_domain
 from nl2policy.policy.experiment import probe_rule, run_one
+from nl2policy.policy.optimize import rolling_mean
 
 
 def main() -> None:
@@ -41,12 +41,12 @@ def main() -> None:
     record_path = run_dir / ("result.json" if (run_dir / "result.json").is_file() else "state.json")
     record = json.loads(record_path.read_text())
     window = get_domain(args.domain).knobs.rolling_window
-    if isinstance(record["episodes"], list):  # state.json: every episode's (step, reward)
-        steps = [s for s, _ in record["episodes"]]
-        rewards = [r for _, r in record["episodes"]]
-        rolling_at = [(steps[k], float(np.mean(rewards[k - window + 1:k + 1]))) for k in range(window - 1, len(steps))]
-    else:  # result.json: the rolling mean already, one point per episode
-        rolling_at = [(s, m) for s, m in record["curve"][window - 1:]]
+    if isinstance(record["episodes"], list):  # state.json: every episode's (step, reward); run_one's rolling mean
+        rolling = rolling_mean([r for _, r in record["episodes"]], window)
+        curve = [(s, float(m)) for (s, _), m in zip(record["episodes"], rolling)]
+    else:  # result.json: that rolling mean already, one point per episode
+        curve = record["curve"]
+    rolling_at = curve[window - 1:]  # full windows only
     lines = [f"# MLP budget probe ({args.domain})", "",
              f"Made by: `PYTHONPATH=src:. .venv/bin/python experiments/mlp_budget_probe.py --domain {args.domain} "
              f"--steps {args.steps} --seed {args.seed} --out {args.out}`" + (" (then `--summarize-only`)" if args.summarize_only else ""),

@@ -20,11 +20,22 @@ def _cell(stats: Optional[dict], yardsticks: dict) -> str:
     return f"{stats['median']:.3f} ± {stats['stderr']:.3f} ({100 * normalized(stats['median'], yardsticks):.0f}%)"
 
 
+def _steps_text(median: Optional[float]) -> str:
+    return "never" if median is None else f"{median / 1000:,.0f}k"
+
+
 def _reach_cell(reach: Optional[dict]) -> str:
-    if not reach:
-        return "-"
-    median = "never" if reach["median"] is None else f"{reach['median'] / 1000:,.0f}k"
-    return f"{median} ({reach['reached']}/{reach['runs']})"
+    return "-" if not reach else f"{_steps_text(reach['median'])} ({reach['reached']}/{reach['runs']})"
+
+
+def _judged(results: list[dict]) -> bool:
+    """Were the runs' trees scored again on the probe's scenes (``experiment.judge_trees``)?"""
+    return any("judged_by" in r for r in results)
+
+
+def _chosen_on(results: list[dict]) -> str:
+    """The rule keep-best and the polish scored trees by (``keep_best.tree_scorer``)."""
+    return next((r["scored_by"] for r in results if "scored_by" in r), "?")
 
 
 def _gap_cell(gap: Optional[dict]) -> str:
@@ -67,9 +78,8 @@ def write_table(domain: str, table: dict, results: list[dict], settings: dict, o
                   "the soft policy PPO trained minus the policy handed back, at the end. Start, kept and polished "
                   "trees are scored "
                   + (f"on the probe's scenes ({y['scored_by']}), not on those keep-best and the polish chose them on "
-                     f"({next(r['scored_by'] for r in results if 'scored_by' in r)}; `table2_{domain}_runs.md` has both)."
-                     if any("judged_by" in r for r in results) else
-                     f"as `optimize` scores them: {next((r['scored_by'] for r in results if 'scored_by' in r), '?')}.")]
+                     f"({_chosen_on(results)}; `table2_{domain}_runs.md` has both)." if _judged(results) else
+                     f"as `optimize` scores them: {_chosen_on(results)}.")]
     for key, what in (("kept_score_gain", "kept tree"), ("polished_score_gain", "polished tree")):
         gain = tree_rows.get(key)
         if gain:
@@ -78,7 +88,7 @@ def write_table(domain: str, table: dict, results: list[dict], settings: dict, o
     if any(table.get(m, {}).get("raw_test_trees") for m in METHODS):
         lines.append("\nLast trees with raw (non-vocabulary) tests: "
                      + ", ".join(f"{LABEL[m]} {table[m]['raw_test_trees']}" for m in METHODS if m in table))
-    comparison = paper_comparison(table, settings.get("steps_per_run"))
+    comparison = paper_comparison(table, settings["steps_per_run"])
     if comparison:
         lines += ["", comparison]
     lines += ["", f"Every run: `table2_{domain}_runs.md`; curves: `curves_{domain}.png`."]
@@ -97,7 +107,7 @@ def _versus(a: dict, b: dict) -> str:
     return "above" if a["median"] - b["median"] > spread else "below" if b["median"] - a["median"] > spread else "level with"
 
 
-def paper_comparison(table: dict, steps: Optional[int]) -> Optional[str]:
+def paper_comparison(table: dict, steps: int) -> Optional[str]:
     """The sentence issue 27 asks for: this table against the paper's Table 2, in the paper's
     columns (initial and best rolling reward), written from the numbers so none is typed in.
 
@@ -118,11 +128,11 @@ def paper_comparison(table: dict, steps: Optional[int]) -> Optional[str]:
     mlp_reach = table["mlp"].get("steps_to_reach_policy")
     reach_text = (f"The tree it hands back is at a normalized {100 * table['reach_level']:.0f}% from the first step in "
                   f"{sum(1 for v in reach['values'] if v == 0)} of {reach['runs']} runs"
-                  + (f"; the MLP's greedy policy gets there after a median of {_reach_cell(mlp_reach).split()[0]} steps "
+                  + (f"; the MLP's greedy policy gets there after a median of {_steps_text(mlp_reach['median'])} steps "
                      f"({mlp_reach['reached']} of {mlp_reach['runs']} runs ever do)." if mlp_reach else "."))
     return (f"**Against the paper's Table 2.** Tambwekar et al. (RA-L 2023) state that PPO from a tree translated from "
             "language matches the RL baselines (abstract; their arXiv v1 said it outperforms them). Here, with "
-            f"{steps if steps is None else f'{steps:,}'} steps a run for every method, the tree-initialized DDT's initial "
+            f"{steps:,} steps a run for every method, the tree-initialized DDT's initial "
             f"rolling reward (normalized: {pct(tree['initial'])}) is {initial}, and its best rolling reward "
             f"({pct(tree['best'])}) is {best}; level means within two combined standard errors of the median. "
             + reach_text)
@@ -137,7 +147,6 @@ def write_runs(domain: str, results: list[dict], out: Path, command: str) -> Pat
     def num(value: Optional[float], fmt: str = ".3f") -> str:
         return "-" if value is None else format(value, fmt)
 
-    judged = any("judged_by" in r for r in results)
     for r in results:
         name = r["method"] + (f" tree#{r['tree_rank']}" if "tree_rank" in r else "")
         last = r["probes"][-1]["policy"] if r.get("probes") else None
@@ -151,10 +160,10 @@ def write_runs(domain: str, results: list[dict], out: Path, command: str) -> Pat
         lines.append(f"| {name} seed {r['seed']} | {r['initial']:.3f} | {r['best']:.3f} | "
                      f"{tree_cell('initial_tree_score')} | {num(last)} | {kept} | {tree_cell('polished_score')} | "
                      f"{num(r.get('soft_minus_discrete'), '+.3f')} | {r['steps']} | {r['seconds']:.0f} |")
-    if judged:
+    if _judged(results):
         lines += ["", f"Trees (start, kept, polished) are scored on the probe's scenes ({results[0]['probe_scored_by']}), "
                       "like the handed-back policy; in brackets, on the scenes keep-best and the polish chose them on "
-                      f"({next(r['scored_by'] for r in results if 'scored_by' in r)}), where the choice flatters them."]
+                      f"({_chosen_on(results)}), where the choice flatters them."]
     path = out / f"table2_{domain}_runs.md"
     path.write_text("\n".join(lines) + "\n")
     return path
