@@ -39,6 +39,8 @@ def main() -> None:
     if not args.summarize_only:
         run_one(args.domain, "mlp", args.seed, args.steps, run_dir, None)
     record_path = run_dir / ("result.json" if (run_dir / "result.json").is_file() else "state.json")
+    if not record_path.is_file():
+        raise SystemExit(f"error: no run in {run_dir} to summarize (run without --summarize-only first)")
     record = json.loads(record_path.read_text())
     window = get_domain(args.domain).knobs.rolling_window
     if isinstance(record["episodes"], list):  # state.json: every episode's (step, reward); run_one's rolling mean
