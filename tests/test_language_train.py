@@ -352,3 +352,22 @@ def test_decoding_with_the_first_members_equals_training_only_those(one_torch_th
     assert [t for t, _ in first_three] == [t for t, _ in alone]
     assert all(a == b for (_, a), (_, b) in zip(first_three, alone))  # same networks: same probabilities
     assert any(a != b for (_, a), (_, b) in zip(all_four, first_three))  # the fourth member did count
+
+
+def test_a_list_of_synthetic_counts_gives_members_their_own_count_in_turn():
+    from nl2policy.language.dataset import member_pairs
+    from nl2policy.language.models.config import ModelConfig
+
+    specs = load_corpus("taxi")[:30]
+    cfg = dataclasses.replace(MODELS["smoke"], ensemble=3, synthetic=[7, 2], member_draws=True)
+    assert cfg.synthetic == (7, 2) and hash(cfg)  # a list from a recipe file becomes a tuple: the config stays hashable
+    draws = member_pairs("taxi", specs, range(30), cfg, seed=0)
+    real_and_augmented = len(member_pairs("taxi", specs, range(30), dataclasses.replace(cfg, synthetic=0), seed=0)(0))
+    # each synthetic draw: its random trees plus one generated description of each of the 30 training trees
+    assert [len(draws(m)) - real_and_augmented - 30 for m in range(3)] == [7, 2, 7]
+    one_count = dataclasses.replace(cfg, synthetic=7)
+    assert member_pairs("taxi", specs, range(30), one_count, seed=0)(2) == draws(2)  # same seed, same count: same draw
+    with pytest.raises(ValueError, match="member_draws"):
+        dataclasses.replace(cfg, member_draws=False)
+    with pytest.raises(ValueError, match="whole numbers"):
+        ModelConfig("flat", "tree", False, [3, -1], member_draws=True)

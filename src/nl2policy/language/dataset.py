@@ -18,11 +18,13 @@ from nl2policy.trees import Tree
 
 
 def training_pairs(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], cfg: ModelConfig,
-                   seed: int = 0) -> list[tuple[str, Tree]]:
+                   seed: int = 0, member: int = 0) -> list[tuple[str, Tree]]:
+    """Ensemble member `member`'s pairs (it sets only how many synthetic pairs: ModelConfig.synthetic_for)."""
     pairs = [(specs[i].description, specs[i].tree) for i in train_idx]
     pairs += augment_fold(specs, train_idx, cfg.aug_copies, seed)
-    if cfg.synthetic:
-        pairs += synthetic_pairs(domain, cfg.synthetic, seed, [specs[i].tree for i in train_idx])
+    synthetic = cfg.synthetic_for(member)
+    if synthetic:
+        pairs += synthetic_pairs(domain, synthetic, seed, [specs[i].tree for i in train_idx])
     return pairs
 
 
@@ -35,4 +37,4 @@ def member_pairs(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], c
     seed += cfg.seed_offset
     if not cfg.member_draws or cfg.ensemble == 1:
         return training_pairs(domain, specs, train_idx, cfg, seed)
-    return lambda member: training_pairs(domain, specs, train_idx, cfg, seed + member)
+    return lambda member: training_pairs(domain, specs, train_idx, cfg, seed + member, member)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import tomllib
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
+from typing import Union
 
 
 @dataclass(frozen=True)
@@ -12,7 +13,7 @@ class ModelConfig:
     encoder: str  # "flat" (BiGRU over all words); the lab adds "han" (words per sentence, then sentences)
     decoder: str  # "tree" (state from the parent node); the lab adds "seq" (state follows the previous token)
     minilm: bool  # fuse frozen MiniLM layers into the word inputs
-    synthetic: int  # synthetic random-tree pairs added to training (0 = none)
+    synthetic: Union[int, tuple[int, ...]]  # synthetic random-tree pairs added to training (0 = none); a list: member m gets entry m % len
     aug_copies: int = 1  # augmented copies of each training description
     epochs: int = 30  # with the cosine schedule in train.fit; 10 left the decoder undertrained
     hidden: int = 64
@@ -26,6 +27,22 @@ class ModelConfig:
     minilm_layers: int = 3  # MiniLM transformer layers run (of 6): accuracy against latency
     seed_offset: int = 0  # added to every member's seed and draw: another training run of the same recipe
     findings_cost: float = 0.0  # decoding: weight of the learned findings' log-agreement (language/findings.py)
+
+    def __post_init__(self) -> None:
+        counts = tuple(self.synthetic) if isinstance(self.synthetic, (list, tuple)) else (self.synthetic,)
+        if not counts or any(not isinstance(n, int) or n < 0 for n in counts):
+            raise ValueError(f"synthetic must be a count of pairs or a list of counts (whole numbers >= 0), not {self.synthetic!r}")
+        if len(set(counts)) > 1 and not self.member_draws:
+            raise ValueError("synthetic counts that differ between members need member_draws = true (each member its own draw)")
+        object.__setattr__(self, "synthetic", counts if isinstance(self.synthetic, (list, tuple)) else self.synthetic)
+
+    def synthetic_for(self, member: int) -> int:
+        """Synthetic pairs in ensemble member `member`'s draw. A list of counts mixes members that
+        lean on the corpus's own trees (few synthetic pairs) with members that lean on the tree
+        grammar (many), in turn: member m gets entry m % len."""
+        if isinstance(self.synthetic, tuple):
+            return self.synthetic[member % len(self.synthetic)]
+        return self.synthetic
 
     def to_dict(self) -> dict:
         return asdict(self)
