@@ -10,6 +10,15 @@ networks, so an 8-member mix is confounded with ensemble size: this is a probe, 
 
     PYTHONPATH=src:. .venv/bin/python -m experiments.translation.ensemble_probe --domain taxi \
         --a /work/scratch/v2_nets --b /work/scratch/v3_nets --out results/translation/ensemble_probe/runs.jsonl
+
+With `--mix` instead of `--a` and `--b`, it reads the kept networks of one recipe whose members
+alternate two synthetic counts (v3-mix200: even members 1,000 pairs, odd members 200) and
+decodes each fold with four members of each kind, four alternating members (0-3: two of each)
+and all eight, all with the fold's own learned findings. At four members the mix stands beside
+its two pure halves at the same ensemble size, which the two-recipe probe could not do.
+
+    PYTHONPATH=src:. .venv/bin/python -m experiments.translation.ensemble_probe --domain taxi \
+        --mix /work/scratch/mix_nets --out results/translation/ensemble_probe/mix.jsonl
 """
 
 from __future__ import annotations
@@ -38,15 +47,20 @@ def fold_key(path: Path) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--domain", required=True)
-    parser.add_argument("--a", type=Path, required=True, help="kept networks of recipe A (a folder)")
-    parser.add_argument("--b", type=Path, required=True, help="kept networks of recipe B (a folder)")
+    parser.add_argument("--a", type=Path, help="kept networks of recipe A (a folder)")
+    parser.add_argument("--b", type=Path, help="kept networks of recipe B (a folder)")
+    parser.add_argument("--mix", type=Path, help="kept networks of one recipe whose members alternate two synthetic counts")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
+    if (args.mix is None) == (args.a is None or args.b is None) or (args.mix and (args.a or args.b)):
+        parser.error("give either --a and --b, or --mix")
     torch.set_num_threads(1)
     cache = MiniLMCache()
     done = set()
     if args.out.is_file():
         done = {(r["domain"], r["fold"]) for r in map(json.loads, args.out.read_text().splitlines())}
+    if args.mix:
+        return probe_mix(args.domain, args.mix, args.out, done, cache)
     a_files = {fold_key(p): p for p in args.a.glob(f"{args.domain}-*.pt")}
     for b_path in sorted(args.b.glob(f"{args.domain}-*.pt")):
         key = fold_key(b_path)
@@ -68,6 +82,32 @@ def main() -> None:
             line[label] = score(args.domain, [t for t, _ in model.predict(texts)], golds)["tree_acc"]
         args.out.parent.mkdir(parents=True, exist_ok=True)
         with args.out.open("a") as f:
+            f.write(json.dumps(line) + "\n")
+        print(json.dumps(line))
+
+
+def probe_mix(domain: str, folder: Path, out: Path, done: set, cache: MiniLMCache) -> None:
+    """Each kept fold of an alternating-count recipe decoded by subsets of its members (module docstring)."""
+    for path in sorted(folder.glob(f"{domain}-*.pt")):
+        key = fold_key(path)
+        if (domain, key) in done:
+            continue
+        kept = torch.load(path, weights_only=False)
+        nets = kept["nets"]
+        if len(nets) < 8:
+            raise SystemExit(f"{path}: {len(nets)} networks; the mix probe needs 8 (alternating synthetic counts)")
+        specs = load_corpus(domain, rounds=PROTOCOL_ROUNDS[key.split("-")[0]])
+        texts = [specs[i].description for i in kept["test"]]
+        golds = [specs[i].tree for i in kept["test"]]
+        line = {"domain": domain, "fold": key, "n": len(texts), "model": kept["name"]}
+        for label, members in (("even 4 (1000 synthetic)", [0, 2, 4, 6]), ("odd 4 (200 synthetic)", [1, 3, 5, 7]),
+                               ("first 4 (alternating)", [0, 1, 2, 3]), ("all 8", list(range(8)))):
+            cfg = dataclasses.replace(MODELS["v3"], ensemble=len(members))  # v3's decoding: beam 4, findings weight 1
+            model = TrainedTranslator.from_states(domain, "v3", cfg, kept["words"], [nets[m] for m in members], cache)
+            model.findings = FindingsModel.from_state(kept["findings"], cache)
+            line[label] = score(domain, [t for t, _ in model.predict(texts)], golds)["tree_acc"]
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with out.open("a") as f:
             f.write(json.dumps(line) + "\n")
         print(json.dumps(line))
 
