@@ -6,7 +6,7 @@ Two measurements, both on the random policy and on corpus trees spread over the 
    rate, mean forward speed and the share of decisions in the right lane over `--episodes`
    episodes each, with standard errors, and the rank correlation of the policies' returns.
 2. **Same scene** (paired), both ways: `--paired-episodes` twin scenes are copied into
-   highway-env (``highway_twin.copy_scene_to``) and both run the policy from there; and every
+   highway-env (``highway_scenes.copy_scene_to``) and both run the policy from there; and every
    one of highway-env's own `--episodes` episodes is replayed in the twin from highway-env's
    scene (``copy_scene_from``). The share of episodes whose return agrees to 1e-6, and the
    crash rate of the replays against highway-env's on the very same episodes.
@@ -41,7 +41,8 @@ from scipy.stats import spearmanr
 from nl2policy.data import corpus_dir
 from nl2policy.domains import get_domain
 from nl2policy.domains.highway import META_ACTION, HighwayFeatures
-from nl2policy.domains.highway_twin import HighwayTwin, copy_scene_from, copy_scene_to
+from nl2policy.domains.highway_scenes import copy_scene_from, copy_scene_to
+from nl2policy.domains.highway_twin import HighwayTwin
 from nl2policy.domains.highway_vec import twin_episodes
 from nl2policy.grid import Job, normalize_ray_flag, ray_failure, ray_option_help, run_jobs
 from nl2policy.trees import parse_tree, tree_to_json

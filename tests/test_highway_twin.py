@@ -15,7 +15,8 @@ from stable_baselines3.common.vec_env import VecMonitor
 from nl2policy.domains import get_domain
 from nl2policy.domains.highway import META_ACTION, HighwayFeatures
 from nl2policy.domains.highway_geometry import RoadOrder
-from nl2policy.domains.highway_twin import HighwayTwin, copy_scene_to
+from nl2policy.domains.highway_scenes import copy_scene_to
+from nl2policy.domains.highway_twin import HighwayTwin
 from nl2policy.domains.highway_vec import HighwayTwinVectorEnv, twin_episodes
 from nl2policy.policy.vec_env import SB3VecEnv
 from nl2policy.trees import parse_tree
