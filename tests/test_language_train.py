@@ -149,6 +149,18 @@ def test_members_trained_in_worker_processes_equal_members_trained_one_by_one(on
             assert torch.equal(p1, p2)
 
 
+def test_findings_trained_beside_the_forked_members_equal_findings_trained_after_them(one_torch_thread):
+    """With workers, the learned findings train as one more job of the members' pool (no core
+    idles while they train at the end); they come out the same as trained in the parent."""
+    specs = load_corpus("taxi")[:16]
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=1, ensemble=2, findings_cost=1.0)
+    pairs = [(s.description, s.tree) for s in specs]
+    inline, forked = fit("taxi", "f", cfg, pairs, seed=2), fit("taxi", "f", cfg, pairs, seed=2, workers=2)
+    got, want = forked.findings.state()["net"], inline.findings.state()["net"]
+    assert got.keys() == want.keys() and all(torch.equal(got[k], want[k]) for k in want)
+    assert forked.findings.cache is forked.cache  # it reads new texts through the model's own cache
+
+
 def test_a_failing_worker_stops_training_with_its_error(one_torch_thread):
     specs = load_corpus("taxi")[:10]
     cfg = dataclasses.replace(MODELS["smoke"], ensemble=2)

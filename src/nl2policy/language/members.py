@@ -12,11 +12,14 @@ import io
 import multiprocessing
 import os
 from queue import Empty
-from typing import Callable, Optional
+from typing import Any, Callable, Optional
 
 import torch
 
 from nl2policy.language.models.config import ModelConfig
+
+SIDE_JOB = -1
+"""The job id of `train_forked`'s side job (members are 0, 1, ...)."""
 
 
 def default_workers(cfg: ModelConfig) -> int:
@@ -69,11 +72,20 @@ def _loads(data: bytes):
     return torch.load(io.BytesIO(data), weights_only=False)
 
 
+def _job_name(job: int) -> str:
+    return "the learned findings" if job == SIDE_JOB else f"ensemble member {job}"
+
+
 def train_forked(members: list[int], train_member: Callable, workers: int,
-                  report: Callable[[int, int, int], None], ckpt: MemberCheckpoints) -> None:
+                  report: Callable[[int, int, int], None], ckpt: MemberCheckpoints,
+                  side_job: Optional[Callable[[], Any]] = None) -> Any:
     """Train `members` in up to `workers` forked processes (one CPU thread each); their
     progress, checkpoints and results come back through one queue and are handled here, in the
-    parent, in the order they arrive. A worker that fails stops the others and raises."""
+    parent, in the order they arrive. A worker that fails stops the others and raises.
+
+    `side_job` (the learned findings, which train on member 0's pairs) runs as one more job of
+    the same pool, first, and its result is returned: run after the members in the parent, it
+    left one core idle for minutes at the end of every training."""
     torch.optim.Adam([torch.zeros(1, requires_grad=True)])  # the first optimizer imports torch._dynamo (seconds): once, here
     ctx = multiprocessing.get_context("fork")
     queue = ctx.Queue()
@@ -81,13 +93,16 @@ def train_forked(members: list[int], train_member: Callable, workers: int,
     def work(member: int) -> None:
         torch.set_num_threads(1)
         try:
+            if member == SIDE_JOB:
+                queue.put(("side", member, _dumps(side_job())))
+                return
             result = train_member(member, lambda n, of: queue.put(("progress", member, (n, of))),
                                   lambda c: queue.put(("checkpoint", member, _dumps(c))))
             queue.put(("done", member, _dumps(result)))
         except BaseException as e:  # noqa: BLE001 - reported to the parent, which raises
             queue.put(("error", member, f"{type(e).__name__}: {e}"))
 
-    pending, running = list(members), {}
+    pending, running, side = ([SIDE_JOB] if side_job else []) + list(members), {}, None
     try:
         while pending or running:
             while pending and len(running) < workers:
@@ -99,7 +114,7 @@ def train_forked(members: list[int], train_member: Callable, workers: int,
             except Empty:
                 dead = [m for m, p in running.items() if p.exitcode not in (None, 0)]
                 if dead:
-                    raise RuntimeError(f"training ensemble member {dead[0]} died (exit code {running[dead[0]].exitcode})")
+                    raise RuntimeError(f"training {_job_name(dead[0])} died (exit code {running[dead[0]].exitcode})")
                 continue
             if kind == "progress":
                 report(member, *payload)
@@ -108,8 +123,12 @@ def train_forked(members: list[int], train_member: Callable, workers: int,
             elif kind == "done":
                 ckpt.finish(member, *_loads(payload))
                 running.pop(member).join()
+            elif kind == "side":
+                side = _loads(payload)
+                running.pop(member).join()
             else:
-                raise RuntimeError(f"training ensemble member {member} failed: {payload}")
+                raise RuntimeError(f"training {_job_name(member)} failed: {payload}")
     finally:
         for process in running.values():
             process.terminate()
+    return side

@@ -16,7 +16,7 @@ from typing import Callable, Optional, Sequence, Union
 import torch
 
 from nl2policy.domains import get_domain
-from nl2policy.language.findings import train_findings
+from nl2policy.language.findings import FindingsModel, train_findings
 from nl2policy.language.grammar import allowed_tokens, next_slot
 from nl2policy.language.members import MemberCheckpoints, train_forked
 from nl2policy.language.models.config import ModelConfig
@@ -104,11 +104,15 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
         if progress:
             progress(sum(done) + of * (cfg.ensemble - len(todo)), of * cfg.ensemble)
 
+    findings_seed = seed + cfg.seed_offset
     if workers > 1 and len(todo) > 1:
         if vocab_texts is not None:  # encode the shared real descriptions once, before the fork
             for text in vocab_texts:
                 model.encode(text)
-        train_forked(todo, train_member, workers, report, ckpt)
+        side = (lambda: train_findings(domain, draw(0), findings_seed, model.cache).state()) if cfg.findings_cost else None
+        findings = train_forked(todo, train_member, workers, report, ckpt, side_job=side)
+        if findings is not None:  # the same findings as trained here, one thread either way
+            model.findings = FindingsModel.from_state(findings, model.cache)
     else:
         for member in todo:
             ckpt.finish(member, *train_member(member, lambda n, of, m=member: report(m, n, of),
@@ -118,8 +122,8 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
         net.load_state_dict(ckpt.finished[member])
         model.nets.append(net.eval())
         model.history += ckpt.history[member]
-    if cfg.findings_cost:  # the learned findings the decoder weighs (findings.py), on the first member's pairs
-        model.findings = train_findings(domain, draw(0), seed + cfg.seed_offset, model.cache)
+    if cfg.findings_cost and model.findings is None:  # the learned findings the decoder weighs (findings.py), on the first member's pairs
+        model.findings = train_findings(domain, draw(0), findings_seed, model.cache)
     return model
 
 
