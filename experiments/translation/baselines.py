@@ -13,11 +13,11 @@ commands train and decode them with the product's own training loop and beam sea
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import torch
 import torch.nn as nn
 
-
-from dataclasses import replace
 
 from nl2policy.language.models.config import MODELS, ModelConfig
 from nl2policy.language.models.network import ARCHITECTURES, Batch, Translator, _bigru_packed, _masked_mean

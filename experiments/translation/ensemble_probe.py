@@ -44,6 +44,28 @@ def fold_key(path: Path) -> str:
     return "-".join(parts[-3:]) if parts[-2].startswith("r") else "-".join(parts[-2:])
 
 
+def held_out(domain: str, kept: dict, key: str) -> tuple[list, list]:
+    """The kept fold's held-out descriptions and their gold trees."""
+    specs = load_corpus(domain, rounds=PROTOCOL_ROUNDS[key.split("-")[0]])
+    return [specs[i].description for i in kept["test"]], [specs[i].tree for i in kept["test"]]
+
+
+def tree_accuracy(domain: str, words: list, nets: list, findings: dict, texts: list, golds: list,
+                  cache: MiniLMCache) -> float:
+    """Exact tree accuracy of `nets` decoded as one ensemble with v3's decoding (beam 4, findings weight 1)."""
+    cfg = dataclasses.replace(MODELS["v3"], ensemble=len(nets))
+    model = TrainedTranslator.from_states(domain, "v3", cfg, words, nets, cache)
+    model.findings = FindingsModel.from_state(findings, cache)
+    return score(domain, [t for t, _ in model.predict(texts)], golds)["tree_acc"]
+
+
+def append_line(out: Path, line: dict) -> None:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with out.open("a") as f:
+        f.write(json.dumps(line) + "\n")
+    print(json.dumps(line))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--domain", required=True)
@@ -52,7 +74,9 @@ def main() -> None:
     parser.add_argument("--mix", type=Path, help="kept networks of one recipe whose members alternate two synthetic counts")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
-    if (args.mix is None) == (args.a is None or args.b is None) or (args.mix and (args.a or args.b)):
+    mix_alone = args.mix is not None and args.a is None and args.b is None
+    pair_alone = args.mix is None and args.a is not None and args.b is not None
+    if not (mix_alone or pair_alone):
         parser.error("give either --a and --b, or --mix")
     torch.set_num_threads(1)
     cache = MiniLMCache()
@@ -69,21 +93,13 @@ def main() -> None:
         a, b = (torch.load(p, weights_only=False) for p in (a_files[key], b_path))
         if a["train"] != b["train"] or a["test"] != b["test"] or a["words"] != b["words"]:
             raise SystemExit(f"{key}: the two folders' networks are not of the same fold")
-        specs = load_corpus(args.domain, rounds=PROTOCOL_ROUNDS[key.split("-")[0]])
-        texts = [specs[i].description for i in b["test"]]
-        golds = [specs[i].tree for i in b["test"]]
+        texts, golds = held_out(args.domain, b, key)
         line = {"domain": args.domain, "fold": key, "n": len(texts), "a_model": a["name"], "b_model": b["name"]}
         for label, nets, findings in (("a", a["nets"], a["findings"]), ("b", b["nets"], b["findings"]),
                                       ("a+b, b's findings", a["nets"] + b["nets"], b["findings"]),
                                       ("a+b, a's findings", a["nets"] + b["nets"], a["findings"])):
-            cfg = dataclasses.replace(MODELS["v3"], ensemble=len(nets))  # v3's decoding: beam 4, findings weight 1
-            model = TrainedTranslator.from_states(args.domain, "v3", cfg, b["words"], nets, cache)
-            model.findings = FindingsModel.from_state(findings, cache)
-            line[label] = score(args.domain, [t for t, _ in model.predict(texts)], golds)["tree_acc"]
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        with args.out.open("a") as f:
-            f.write(json.dumps(line) + "\n")
-        print(json.dumps(line))
+            line[label] = tree_accuracy(args.domain, b["words"], nets, findings, texts, golds, cache)
+        append_line(args.out, line)
 
 
 def probe_mix(domain: str, folder: Path, out: Path, done: set, cache: MiniLMCache) -> None:
@@ -96,20 +112,12 @@ def probe_mix(domain: str, folder: Path, out: Path, done: set, cache: MiniLMCach
         nets = kept["nets"]
         if len(nets) < 8:
             raise SystemExit(f"{path}: {len(nets)} networks; the mix probe needs 8 (alternating synthetic counts)")
-        specs = load_corpus(domain, rounds=PROTOCOL_ROUNDS[key.split("-")[0]])
-        texts = [specs[i].description for i in kept["test"]]
-        golds = [specs[i].tree for i in kept["test"]]
+        texts, golds = held_out(domain, kept, key)
         line = {"domain": domain, "fold": key, "n": len(texts), "model": kept["name"]}
         for label, members in (("even 4 (1000 synthetic)", [0, 2, 4, 6]), ("odd 4 (200 synthetic)", [1, 3, 5, 7]),
                                ("first 4 (alternating)", [0, 1, 2, 3]), ("all 8", list(range(8)))):
-            cfg = dataclasses.replace(MODELS["v3"], ensemble=len(members))  # v3's decoding: beam 4, findings weight 1
-            model = TrainedTranslator.from_states(domain, "v3", cfg, kept["words"], [nets[m] for m in members], cache)
-            model.findings = FindingsModel.from_state(kept["findings"], cache)
-            line[label] = score(domain, [t for t, _ in model.predict(texts)], golds)["tree_acc"]
-        out.parent.mkdir(parents=True, exist_ok=True)
-        with out.open("a") as f:
-            f.write(json.dumps(line) + "\n")
-        print(json.dumps(line))
+            line[label] = tree_accuracy(domain, kept["words"], [nets[m] for m in members], kept["findings"], texts, golds, cache)
+        append_line(out, line)
 
 
 if __name__ == "__main__":

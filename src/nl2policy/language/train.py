@@ -110,9 +110,9 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
             for text in vocab_texts:
                 model.encode(text)
         side = (lambda: train_findings(domain, draw(0), findings_seed, model.cache).state()) if cfg.findings_cost else None
-        findings = train_forked(todo, train_member, workers, report, ckpt, side_job=side)
-        if findings is not None:  # the same findings as trained here, one thread either way
-            model.findings = FindingsModel.from_state(findings, model.cache)
+        findings_state = train_forked(todo, train_member, workers, report, ckpt, side_job=side)
+        if findings_state is not None:  # the same findings as trained below, one thread either way
+            model.findings = FindingsModel.from_state(findings_state, model.cache)
     else:
         for member in todo:
             ckpt.finish(member, *train_member(member, lambda n, of, m=member: report(m, n, of),

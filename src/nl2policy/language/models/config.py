@@ -29,20 +29,23 @@ class ModelConfig:
     findings_cost: float = 0.0  # decoding: weight of the learned findings' log-agreement (language/findings.py)
 
     def __post_init__(self) -> None:
-        counts = tuple(self.synthetic) if isinstance(self.synthetic, (list, tuple)) else (self.synthetic,)
+        if isinstance(self.synthetic, list):  # a recipe file's list: a tuple keeps the config hashable
+            object.__setattr__(self, "synthetic", tuple(self.synthetic))
+        counts = self._synthetic_counts()
         if not counts or any(not isinstance(n, int) or n < 0 for n in counts):
             raise ValueError(f"synthetic must be a count of pairs or a list of counts (whole numbers >= 0), not {self.synthetic!r}")
         if len(set(counts)) > 1 and not self.member_draws:
             raise ValueError("synthetic counts that differ between members need member_draws = true (each member its own draw)")
-        object.__setattr__(self, "synthetic", counts if isinstance(self.synthetic, (list, tuple)) else self.synthetic)
+
+    def _synthetic_counts(self) -> tuple:
+        return self.synthetic if isinstance(self.synthetic, tuple) else (self.synthetic,)
 
     def synthetic_for(self, member: int) -> int:
         """Synthetic pairs in ensemble member `member`'s draw. A list of counts mixes members that
         lean on the corpus's own trees (few synthetic pairs) with members that lean on the tree
         grammar (many), in turn: member m gets entry m % len."""
-        if isinstance(self.synthetic, tuple):
-            return self.synthetic[member % len(self.synthetic)]
-        return self.synthetic
+        counts = self._synthetic_counts()
+        return counts[member % len(counts)]
 
     def to_dict(self) -> dict:
         return asdict(self)
