@@ -18,7 +18,7 @@ import torch
 
 from nl2policy.domains import get_domain
 from nl2policy.grid import Job, run_jobs
-from nl2policy.language.corpus import Spec, kfold, load_corpus, new_writer_folds
+from nl2policy.language.corpus import Spec, kfold, load_corpus, new_writer_folds, policy_key
 from nl2policy.language.dataset import member_pairs
 from nl2policy.language.models.config import MODELS, networks_config
 from nl2policy.language.models.pretrained import MiniLMCache
@@ -69,14 +69,17 @@ def unseen_trees(specs: Sequence[Spec], train_idx: Sequence[int], test_idx: Sequ
 
 def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_idx: Sequence[int], name: str,
              seed: int, cache: MiniLMCache, workers: int = 1, keep: Optional[Path] = None,
-             reuse: Optional[dict] = None) -> dict:
+             reuse: Optional[dict] = None, hold_test_trees: bool = False) -> dict:
     """Train `name` on one fold and score it on the held-out descriptions. `keep`: also save the
     fold's networks there (with their word vocabulary and the fold's indices), so decoding
     choices can be studied on them later without retraining. `reuse`: such a saved fold (same
-    fold, a model with the same training: `kept_networks`), decoded instead of training anew."""
+    fold, a model with the same training: `kept_networks`), decoded instead of training anew.
+    `hold_test_trees`: no synthetic pair has a test description's policy (the protocols of
+    unseen trees: a random tree that happens to be a test tree would be a tree training saw)."""
     start = time.time()
     cfg = MODELS[name]
-    pairs = member_pairs(domain, specs, train_idx, cfg)
+    held = {policy_key(domain, specs[i].tree) for i in test_idx} if hold_test_trees else set()
+    pairs = member_pairs(domain, specs, train_idx, cfg, exclude=lambda tree: policy_key(domain, tree) in held)
     if reuse is not None:
         model = TrainedTranslator.from_states(domain, name, cfg, reuse["words"], reuse["nets"][:cfg.ensemble], cache)
     else:
@@ -107,13 +110,16 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     result.update(unseen=sum(unseen), unseen_right=sum(u and r for u, r in zip(unseen, right)))
     # what went wrong, for error analysis without retraining: (spec id, the predicted tree's tokens)
     result["errors"] = [[specs[i].id, " ".join(to_tokens(p))] for i, p, r in zip(test_idx, preds, right) if not r]
+    # every translation (spec id, predicted tokens), for tables by tree size and the clarify probe
+    result["predictions"] = [[specs[i].id, " ".join(to_tokens(p))] for i, p in zip(test_idx, preds)]
     # the same networks on the same fold, decoded with less of each decoding choice the config makes
     for key, (attr, off, _) in DECODING_ALTERNATIVES.items():
         if getattr(model.cfg, attr, off) > off:  # (a setting of deleted variants: only in older records)
             setattr(model, attr, off)
             result[key] = score(domain, [t for t, _ in model.predict(texts)], golds)["tree_acc"]
             setattr(model, attr, None)  # back to the config's
-    result.update(train_pairs=len(pairs(0) if callable(pairs) else pairs), seconds=round(time.time() - start, 1))
+    result.update(train_pairs=len(pairs(0) if callable(pairs) else pairs), seconds=round(time.time() - start, 1),
+                  synthetic_holds_test_trees=hold_test_trees)
     return result
 
 
@@ -130,6 +136,9 @@ def machine() -> str:
     flags = next((line.split(":", 1)[1].split() for line in info.splitlines() if line.startswith("flags")), [])
     return f"{model or platform.machine()}, {'avx512' if 'avx512f' in flags else 'no avx512'}"
 
+
+HELD_TREE_PROTOCOLS = ("trees", "new")
+"""The protocols whose test trees training must never see, synthetic pairs included."""
 
 PROTOCOL_ROUNDS = {"cv": (1,), "writers": (1,), "trees": (1, 2), "new": (1, 2), "cvboth": (1, 2), "writersboth": (1, 2)}
 """The corpus rounds each protocol runs on: the paper's protocol and leave-writers-out on round
@@ -178,7 +187,8 @@ def fold_job(domain: str, name: str, protocol: str, repeats: int, key: str, work
     keep = keep_networks / f"{domain}-{name}-{key}.pt" if keep_networks else None
     reuse = kept_networks(networks_from, domain, name, key, tr, te) if networks_from else None
     cache = _CACHES.setdefault(domain, MiniLMCache())
-    result = run_fold(domain, specs, tr, te, name, seed, cache, workers, keep, reuse)
+    result = run_fold(domain, specs, tr, te, name, seed, cache, workers, keep, reuse,
+                      hold_test_trees=protocol in HELD_TREE_PROTOCOLS)
     result.update(domain=domain, model=name, fold=key, protocol=protocol, workers=workers,
                   machine=reuse["machine"] if reuse else machine())
     if reuse:

@@ -190,10 +190,16 @@ def describe(tree: Tree, domain: str, rng: random.Random) -> str:
 
 
 def synthetic_pairs(domain: str, n_random: int, seed: int = 0, extra_trees: Sequence[Tree] = (),
-                    per_tree: int = 1) -> list[tuple[str, Tree]]:
+                    per_tree: int = 1, exclude: Callable[[Tree], bool] = lambda tree: False) -> list[tuple[str, Tree]]:
     """`n_random` random trees plus `per_tree` fresh descriptions of each tree in `extra_trees`
-    (pass training-fold trees only)."""
+    (pass training-fold trees only). A random tree for which `exclude` is true is drawn again: an
+    evaluation that holds trees out passes them here, so no synthetic pair teaches a test tree."""
     vocab = get_domain(domain).vocab
     rng = random.Random(seed)
-    trees = [random_tree(vocab, rng) for _ in range(n_random)] + [t for t in extra_trees for _ in range(per_tree)]
+    trees = []
+    while len(trees) < n_random:
+        tree = random_tree(vocab, rng)
+        if not exclude(tree):
+            trees.append(tree)
+    trees += [t for t in extra_trees for _ in range(per_tree)]
     return [(describe(t, domain, rng), t) for t in trees]
