@@ -55,7 +55,8 @@ def main() -> None:
     from nl2policy.language.models.pretrained import encode_tokens
     from nl2policy.language.text import split_sentences
     from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
-    from nl2policy.language.translate import SHIPPED_DIR, get_model, model_path, train_default, translate
+    from nl2policy.language.shipping import train_default
+    from nl2policy.language.translate import SHIPPED_DIR, get_model, model_path, translate
 
     name = args.model or DEFAULT_MODEL
     # one-time loads (WordNet, phrase tables, MiniLM weights, the optimizer's lazy imports)

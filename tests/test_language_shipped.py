@@ -38,7 +38,9 @@ def test_translate_uses_the_shipped_model_without_training(domain, empty_home, m
     def no_training(*args, **kwargs):
         raise AssertionError("translate() trained a model although one is shipped")
 
-    monkeypatch.setattr(tr, "train_default", no_training)
+    from nl2policy.language import shipping
+
+    monkeypatch.setattr(shipping, "train_default", no_training)
     assert tr.find_model(domain) == tr.SHIPPED_DIR / f"{domain}-{DEFAULT_MODEL}.pt"
     specs = load_corpus(domain)
     result = tr.translate(domain, specs[0].description)  # no training: train_default raises above

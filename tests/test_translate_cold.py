@@ -63,11 +63,16 @@ try:
     app(["translate", "--domain", "taxi", "--json", sys.argv[1]])
 except SystemExit as exc:
     assert not exc.code, exc.code
-print(json.dumps({"transformers": "transformers" in sys.modules}))
+training = sorted(m for m in sys.modules if m.startswith(TRAINING))
+print(json.dumps({"transformers": "transformers" in sys.modules, "training": training}))
 """
+TRAINING = ("nl2policy.language.train", "nl2policy.language.members", "nl2policy.language.dataset",
+            "nl2policy.language.augment", "nl2policy.language.synthetic", "nl2policy.language.shipping")
+"""The training stack: a translation loads a model and never needs any of it."""
+COLD = f"TRAINING = {TRAINING!r}\n" + COLD
 
 
-def test_cold_translate_does_not_import_transformers():
+def test_cold_translate_imports_neither_transformers_nor_training():
     from nl2policy.language.translate import translate
 
     text = "If I have a passenger I drive to the airport, otherwise I go to the city."
@@ -75,8 +80,16 @@ def test_cold_translate_does_not_import_transformers():
     proc = subprocess.run([sys.executable, "-c", COLD, text], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     lines = proc.stdout.strip().splitlines()
-    assert json.loads(lines[-1]) == {"transformers": False}
+    assert json.loads(lines[-1]) == {"transformers": False, "training": []}
     assert json.loads(lines[-2]) == translate("taxi", text).to_json()  # the same translation as in-process
+
+
+def test_importing_translate_loads_no_training_module():
+    code = ("import sys, nl2policy.language.translate, nl2policy.cli\n"
+            f"print(sorted(m for m in sys.modules if m.startswith({TRAINING!r})))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == "[]"
 
 
 def test_the_executable_ends_fast_with_all_its_output_written():

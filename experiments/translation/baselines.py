@@ -19,7 +19,7 @@ import torch
 import torch.nn as nn
 
 
-from nl2policy.language.models.config import MODELS, ModelConfig
+from nl2policy.language.models.config import MODELS, ModelConfig, load_recipe
 from nl2policy.language.models.network import ARCHITECTURES, Batch, Translator, _bigru_packed, _masked_mean
 
 
@@ -111,3 +111,5 @@ MODELS.update(BASELINES)
 # members, alternately 1,000 synthetic pairs (v3's) and 200 (v2's); member 0's draw, and so the
 # learned findings, is v3's kind.
 MODELS["v3-mix200"] = replace(MODELS["v3"], synthetic=(1000, 200), ensemble=8)
+# The candidate for v4 (its recipe ships beside v3's until it has been measured against it).
+MODELS["v4"] = load_recipe("v4")

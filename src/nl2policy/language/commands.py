@@ -27,7 +27,7 @@ def train_translator(
     from its checkpoint if a run was interrupted)."""
     from nl2policy.console import domain_or_fail, err, fail, progress_bar
     from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
-    from nl2policy.language.translate import train_default
+    from nl2policy.language.shipping import train_default
 
     domain_or_fail(domain)
     name = model or DEFAULT_MODEL

@@ -19,7 +19,8 @@ PAD, UNK = "<pad>", "<unk>"
 MIN_FREQ = 5
 """Words seen fewer times than this in a training fold become <unk> (the paper's rule)."""
 
-# Texting shorthand -> plain words. Several expand to more than one token.
+# Texting shorthand -> plain words (general English texting and contractions, not read off the
+# corpus). Several expand to more than one token.
 SHORTHAND = {
     "u": "you", "ur": "your", "r": "are", "ppl": "people", "b/c": "because", "bc": "because",
     "cuz": "because", "coz": "because", "w/": "with", "w/o": "without", "rn": "right now",
