@@ -253,3 +253,66 @@ def test_pages_fit_a_phone_screen_and_work_offline(server, browser):
     assert page.evaluate("document.querySelector('link[rel=icon]').href").endswith("favicon.svg")
     assert outside == []  # nothing loaded from the internet
     page.close()
+
+
+EVIL_PAGE = """<!doctype html><title>another site</title><script>
+async function attack(app, run, going) {
+  const out = {};
+  for (const [name, method, url, body] of [["resume", "POST", `/api/runs/${run}/resume`, null],
+                                           ["start", "POST", "/api/runs", JSON.stringify(%s)],
+                                           ["cancel", "POST", `/api/runs/${going}/cancel`, null],
+                                           ["delete", "DELETE", `/api/runs/${run}`, null]]) {
+    try {
+      const r = await fetch(app + url, {method, body, headers: {"Content-Type": "text/plain"}, mode: "no-cors"});
+      out[name] = r.type;
+    } catch (e) { out[name] = "blocked: " + e.message; }
+  }
+  return out;
+}
+</script>"""
+
+
+def test_a_page_on_another_origin_cannot_change_runs(server, browser):
+    """A page served from a second loopback origin sends the "simple" cross-site requests a
+    hostile site would (text/plain, no preflight); the app refuses them and nothing changes."""
+    import http.server
+    import urllib.request
+
+    url, _ = server
+    tree = {"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_city"}}
+    req = lambda method, path, body=None: json.loads(urllib.request.urlopen(urllib.request.Request(
+        url + path, method=method, data=json.dumps(body).encode() if body is not None else None,
+        headers={"Content-Type": "application/json"})).read())
+    run = req("POST", "/api/runs", {"domain": "taxi", "tree": tree, "steps": 100_000})
+    req("POST", f"/api/runs/{run['id']}/cancel")
+    deadline = time.time() + 30
+    while req("GET", f"/api/runs/{run['id']}")["status"] != "cancelled" and time.time() < deadline:
+        time.sleep(0.2)  # a running run is cancelled once its trainer has ended
+    going = req("POST", "/api/runs", {"domain": "taxi", "tree": tree, "steps": 100_000})
+    while req("GET", f"/api/runs/{going['id']}")["status"] != "running" and time.time() < deadline:
+        time.sleep(0.2)
+    before = [(r["id"], r["status"]) for r in req("GET", "/api/runs")]
+    page_html = (EVIL_PAGE % json.dumps({"domain": "taxi", "tree": tree, "steps": 512})).encode()
+
+    class Page(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.end_headers()
+            self.wfile.write(page_html)
+
+        def log_message(self, *args):
+            pass
+
+    evil = http.server.HTTPServer(("127.0.0.1", free_port()), Page)
+    threading.Thread(target=evil.serve_forever, daemon=True).start()
+    try:
+        page = browser.new_page()
+        page.goto(f"http://127.0.0.1:{evil.server_address[1]}/")
+        sent = page.evaluate("([app, run, going]) => attack(app, run, going)", [url, run["id"], going["id"]])
+        assert set(sent) == {"resume", "start", "cancel", "delete"}
+    finally:
+        evil.shutdown()
+    time.sleep(1)
+    assert [(r["id"], r["status"]) for r in req("GET", "/api/runs")] == before
+    req("POST", f"/api/runs/{going['id']}/cancel")

@@ -14,11 +14,13 @@ from typing import Optional
 
 import typer
 
-from nl2policy.console import (console, description_or_fail, domain_or_fail, err, fail, out_dir_or_fail, progress_bar,
-                               seed_or_fail, steps_or_fail, tree_or_fail)
+from nl2policy.console import (CommandGroup, argv_problem, console, description_or_fail, domain_or_fail, err, fail,
+                               out_dir_or_fail, progress_bar, seed_or_fail, steps_or_fail, tree_or_fail)
 from nl2policy.domains import DOMAINS
+from nl2policy.limits import MAX_CLI_STEPS, MAX_EPISODES
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, help="Plain-English robot policies as readable, trainable decision trees.")
+app = typer.Typer(cls=CommandGroup, add_completion=False, no_args_is_help=True,
+                  help="Plain-English robot policies as readable, trainable decision trees.")
 
 __all__ = ["app", "console", "err", "fail", "progress_bar", "domain_or_fail", "tree_or_fail", "main"]
 
@@ -27,7 +29,7 @@ __all__ = ["app", "console", "err", "fail", "progress_bar", "domain_or_fail", "t
 def evaluate(
     domain: str = typer.Option(..., help=f"One of: {', '.join(DOMAINS)}"),
     tree: str = typer.Option(..., help="A tree as inline JSON or a path to a JSON file"),
-    episodes: int = typer.Option(20, min=1),
+    episodes: int = typer.Option(20, min=1, max=MAX_EPISODES),
     seed: int = typer.Option(0),
 ) -> None:
     """Run a tree as a policy; print {"mean_return", "stderr", "episodes"} as JSON."""
@@ -43,7 +45,7 @@ def evaluate(
 
 
 @app.command()
-def compare(episodes: int = typer.Option(10, min=1), seed: int = typer.Option(0)) -> None:
+def compare(episodes: int = typer.Option(10, min=1, max=MAX_EPISODES), seed: int = typer.Option(0)) -> None:
     """The most common corpus trees against the random policy (and taxi's optimum), per domain."""
     from nl2policy.compare import run_compare
 
@@ -55,7 +57,7 @@ def compare(episodes: int = typer.Option(10, min=1), seed: int = typer.Option(0)
 def run(
     text: Optional[str] = typer.Argument(None, help="What the robot should do, in plain English (default: an example)"),
     domain: str = typer.Option("taxi", help=f"One of: {', '.join(DOMAINS)}"),
-    steps: int = typer.Option(10_000, help="PPO env steps (whole rollouts: rounded up to a multiple of 512 for taxi, 4,096 for highway on its twin)"),
+    steps: int = typer.Option(10_000, max=MAX_CLI_STEPS, help="PPO env steps (whole rollouts: rounded up to a multiple of 512 for taxi, 4,096 for highway on its twin)"),
     seed: int = typer.Option(0),
     out: Path = typer.Option(Path("runs/main"), help="Output folder for trees, curve and summary"),
 ) -> None:
@@ -74,8 +76,8 @@ def run(
 @app.command("corpus-returns")
 def corpus_returns_cmd(
     domain: str = typer.Option(..., help=f"One of: {', '.join(DOMAINS)}"),
-    screen_episodes: int = typer.Option(10, min=1, help="Episodes per tree when ranking all corpus trees"),
-    episodes: int = typer.Option(100, min=2, help="Episodes for the final, fresh-seed measurements"),
+    screen_episodes: int = typer.Option(10, min=1, max=MAX_EPISODES, help="Episodes per tree when ranking all corpus trees"),
+    episodes: int = typer.Option(100, min=2, max=MAX_EPISODES, help="Episodes for the final, fresh-seed measurements"),
     seed: int = typer.Option(0),
     out: Path = typer.Option(Path("results/foundation"), help="Folder for tree_returns_<domain>.md / .json"),
 ) -> None:
@@ -120,6 +122,10 @@ def main() -> None:  # pragma: no cover - console entry
     terminal.owns_process = True
     from nl2policy.grid import normalize_ray_flag
 
+    problem = argv_problem(sys.argv[1:])
+    if problem:
+        err.print(f"[bold red]error:[/] {problem}", highlight=False, soft_wrap=True)
+        sys.exit(2)
     app(args=normalize_ray_flag(sys.argv[1:]))
 
 

@@ -18,8 +18,11 @@ from typing import TYPE_CHECKING, NoReturn
 import typer
 from rich.console import Console
 from rich.markup import escape
+from typer._click import exceptions as click_errors  # typer 0.29 carries its own click (pinned)
+from typer.core import TyperGroup
 
-from nl2policy.limits import MAX_SEED, clipped, description_problem, steps_problem, trained_steps
+from nl2policy.errors import UserError
+from nl2policy.limits import MAX_SEED, clipped, description_problem, steps_problem, text_problem, trained_steps
 
 if TYPE_CHECKING:
     from rich.progress import Progress
@@ -48,6 +51,45 @@ def fail(message: str, code: int = 2) -> NoReturn:
     one_line = clipped(" ".join(str(message).split()))
     err.print(f"[bold red]error:[/] {escape(one_line)}", highlight=False, soft_wrap=True)
     raise typer.Exit(code)
+
+
+EXPECTED_ERRORS = (UserError, OSError, UnicodeError)
+"""What a command may meet that is the user's or the machine's to fix, not a bug: a corpus or
+model folder that is missing, a disk that is full or read-only, text that is not UTF-8."""
+
+
+def _os_reason(exc: OSError) -> str:
+    where = f" ({exc.filename})" if getattr(exc, "filename", None) else ""
+    return f"{exc.strerror or exc}{where}"
+
+
+class CommandGroup(TyperGroup):
+    """The outermost layer of every command: an expected error (EXPECTED_ERRORS) or a usage
+    error (a bad option value, an unknown command) ends as one ``error: ...`` line and exit
+    code 2, never a traceback or a boxed screen. Bugs still raise, so they are seen."""
+
+    def invoke(self, ctx: typer.Context):
+        try:
+            return super().invoke(ctx)
+        except (click_errors.NoArgsIsHelpError, typer.Exit):
+            raise
+        except click_errors.UsageError as exc:
+            command = f" {exc.ctx.command_path} --help" if exc.ctx is not None else " --help"
+            fail(f"{exc.format_message()} (see{command})")
+        except EXPECTED_ERRORS as exc:
+            if isinstance(exc, BrokenPipeError):
+                raise typer.Exit(1)
+            fail(_os_reason(exc) if isinstance(exc, OSError) and not isinstance(exc, UserError) else str(exc))
+
+
+def argv_problem(args: list[str]) -> str | None:
+    """Why the command line cannot be read: an argument that is not valid text (Python hands
+    invalid UTF-8 over as lone surrogates, which fail wherever they are printed or stored)."""
+    for i, arg in enumerate(args):
+        problem = text_problem(arg, f"argument {i + 1}")
+        if problem:
+            return problem + "; pass UTF-8 text"
+    return None
 
 
 def progress_bar(**kwargs) -> "Progress":

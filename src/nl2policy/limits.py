@@ -22,6 +22,17 @@ MAX_WAITING_RUNS = 20
 """Queued runs the server keeps: more would only hold the machine for hours."""
 
 
+MAX_CLI_STEPS = 100_000_000
+"""PPO steps one command may ask for: about a day of PPO on one core here (ppo_overhead
+benchmark: ~1,000-2,000 steps a second); more is a typo, not a plan."""
+
+MAX_EPISODES = 1_000_000
+"""Episodes or sampled states one command may ask for (a million taxi episodes take hours)."""
+
+MAX_COUNT = 10_000
+"""Any other count a command takes (candidate trees, seeds, workers)."""
+
+
 MAX_MESSAGE = 400
 """Characters of any one error message: messages quote what was given, which may be huge."""
 
@@ -31,9 +42,30 @@ def clipped(text: str, limit: int = MAX_MESSAGE) -> str:
     return text if len(text) <= limit else f"{text[:limit]}… ({len(text):,} characters)"
 
 
+def has_visible(text: str) -> bool:
+    """Whether `text` shows anything: a character that is not a space, a control or a format
+    character (zero-width spaces and joiners, byte-order marks) or unassigned."""
+    import unicodedata
+
+    return any(unicodedata.category(c)[0] not in "ZC" for c in text)
+
+
+def text_problem(text: str, what: str = "the text") -> str | None:
+    """Why `text` cannot be stored or read as text: characters that are not Unicode (a lone
+    surrogate, from invalid UTF-8 or a JSON escape such as \\ud800). Never quotes them."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        return f"{what} is not valid Unicode text (character {exc.start + 1} is a lone surrogate, e.g. from invalid UTF-8)"
+    return None
+
+
 def description_problem(text: str) -> str | None:
     """Why a description cannot be translated, or None when it can be."""
-    if not text.strip():
+    problem = text_problem(text, "the description")
+    if problem:
+        return problem
+    if not has_visible(text):
         return "the description is empty: say what the robot should do"
     if len(text) > MAX_DESCRIPTION:
         return f"the description is {len(text):,} characters long; the limit is {MAX_DESCRIPTION:,}"

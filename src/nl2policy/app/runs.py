@@ -16,17 +16,27 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import os
 import re
+import sqlite3
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 from typing import Optional
 
 from nl2policy.app.runlock import holder
 from nl2policy.app.store import Store
 from nl2policy.app.trainer import LOCKED_EXIT
+
+log = logging.getLogger("nl2policy.runs")
+STORE_FAULTS = (sqlite3.Error, OSError)
+"""What the database can raise while it is locked by another process, damaged or on a failing
+disk: the run manager outlives every one of them."""
+RETRY_MAX_S = 5.0
+"""The longest wait between two tries at a store that failed (the waits double from 0.25 s)."""
 
 
 class RunManager:
@@ -42,8 +52,7 @@ class RunManager:
         self._thread = threading.Thread(target=self._loop, name="run-manager", daemon=True)
 
     def start(self) -> None:
-        self.reconcile()
-        self._thread.start()
+        self._thread.start()  # it reconciles first, retrying while the store fails
 
     def reconcile(self) -> None:
         """After a restart no run of ours is going: record what the folders say happened."""
@@ -93,19 +102,49 @@ class RunManager:
         return True
 
     def _loop(self) -> None:
-        while True:
-            with self._wake:
-                while not self._stopping and (len(self._active) >= self.max_parallel or not self._next_queued()):
-                    self._wake.wait(timeout=1.0)
-                if self._stopping:
-                    return
-                run = self._next_queued()
-                self.store.set_run_status(run["id"], "running")
+        """Reconcile, then start queued runs as slots free up. A store fault (a lock held past
+        SQLite's timeout, a damaged file, a failing disk) is logged and retried with a growing
+        wait, so queued runs start as soon as the store is healthy again."""
+        self._retrying(self.reconcile)
+        while not self._stopping:
+            started = self._retrying(self._start_next)
+            if started is not None:
+                run, proc, log_start = started
+                watcher = threading.Thread(target=self._watch, args=(run, proc, log_start), daemon=True)
+                self._watchers = [w for w in self._watchers if w.is_alive()] + [watcher]
+                watcher.start()
+
+    def _retrying(self, step):
+        """`step()`, tried again after every store fault until it succeeds or the manager stops
+        (then None)."""
+        wait = 0.25
+        while not self._stopping:
+            try:
+                return step()
+            except STORE_FAULTS as exc:
+                log.warning("run manager: the database failed (%s); retrying in %.2g s", exc, wait)
+                with self._wake:
+                    self._wake.wait(timeout=wait)
+                wait = min(2 * wait, RETRY_MAX_S)
+        return None
+
+    def _start_next(self) -> Optional[tuple[dict, subprocess.Popen, int]]:
+        """Wait for a free slot and a queued run, mark it running and launch it; None when
+        stopping."""
+        with self._wake:
+            while not self._stopping and (len(self._active) >= self.max_parallel or not self._next_queued()):
+                self._wake.wait(timeout=1.0)
+            if self._stopping:
+                return None
+            run = self._next_queued()
+            self.store.set_run_status(run["id"], "running")
+            try:
                 proc, log_start = self._launch(run)
-                self._active[run["id"]] = proc
-            watcher = threading.Thread(target=self._watch, args=(run, proc, log_start), daemon=True)
-            self._watchers = [w for w in self._watchers if w.is_alive()] + [watcher]
-            watcher.start()
+            except OSError as exc:  # its folder cannot be written: this run fails, the others go on
+                self.store.set_run_status(run["id"], "failed", error=f"could not start the training process: {exc}")
+                return None
+            self._active[run["id"]] = proc
+            return run, proc, log_start
 
     def _next_queued(self) -> Optional[dict]:
         queued = self.store.list_runs(status="queued", limit=1)
@@ -135,15 +174,18 @@ class RunManager:
         out = Path(run["out_dir"])
         summary = _read_summary(out)
         if code == 0 and summary is not None:
-            self.store.set_run_status(run["id"], "finished", summary=summary)
+            status, fields = "finished", {"summary": summary}
         elif cancelled:
-            self.store.set_run_status(run["id"], "cancelled", error="cancelled; resume to continue from its last checkpoint")
+            status, fields = "cancelled", {"error": "cancelled; resume to continue from its last checkpoint"}
         elif stopping:
-            self.store.set_run_status(run["id"], "interrupted", error="the server stopped; resume to continue")
+            status, fields = "interrupted", {"error": "the server stopped; resume to continue"}
         elif code == LOCKED_EXIT:
-            self.store.set_run_status(run["id"], "interrupted", error=failure_reason(out, code, log_start))
+            status, fields = "interrupted", {"error": failure_reason(out, code, log_start)}
         else:
-            self.store.set_run_status(run["id"], "failed", error=failure_reason(out, code, log_start))
+            status, fields = "failed", {"error": failure_reason(out, code, log_start)}
+        # a store fault must not leave the run "running" for ever; if the server stops first,
+        # the next start's reconcile reads the outcome from the folder
+        self._retrying(lambda: self.store.set_run_status(run["id"], status, **fields))
 
     def active(self) -> list[str]:
         with self._lock:

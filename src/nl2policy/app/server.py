@@ -26,7 +26,7 @@ from nl2policy.app.runs import RunManager, read_curve
 from nl2policy.app.store import WAITING, Store
 from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.limits import (MAX_BODY_BYTES, MAX_DESCRIPTION, MAX_SEED, MAX_STEPS, MAX_WAITING_RUNS, description_problem,
-                              steps_problem)
+                              has_visible, steps_problem)
 from nl2policy.trees import GRID_SLOTS, TreeError, from_grid, parse_tree, to_grid, to_svg, to_text, tree_to_json
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -95,7 +95,7 @@ def changed_slots(before: list, after: list) -> list[int]:
 def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = None,
                results_dir: Optional[Path] = None, max_parallel_runs: int = 1,
                allowed_hosts: Optional[tuple[str, ...]] = guards.LOOPBACK_HOSTS,
-               max_waiting_runs: int = MAX_WAITING_RUNS) -> FastAPI:
+               max_waiting_runs: int = MAX_WAITING_RUNS, body_timeout: float = guards.BODY_TIMEOUT_S) -> FastAPI:
     """Build the app. `translator(domain, text)` defaults to the trained translator.
     `allowed_hosts`: the Host header values served (None: any), see `guards`. Raises
     `store.StoreError` for a database that cannot be used."""
@@ -125,7 +125,7 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
     app = FastAPI(title="nl2policy", version="0.1.0", lifespan=lifespan, docs_url=None, redoc_url=None,
                   description="Describe a policy in plain English, inspect and edit its tree, optimize it with PPO.")
     app.state.store, app.state.runs = store, runs
-    guards.install(app, allowed_hosts, MAX_BODY_BYTES)
+    guards.install(app, allowed_hosts, MAX_BODY_BYTES, body_timeout)
 
     @app.exception_handler(sqlite3.Error)
     async def database_error(request: Request, exc: sqlite3.Error) -> JSONResponse:
@@ -294,7 +294,9 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
     @app.post("/api/submissions", status_code=201)
     def submit(body: SubmissionIn) -> dict:
         tree = _parse(body.domain, grid=body.grid)
-        if not body.description.strip():
+        if not has_visible(body.writer):
+            raise HTTPException(422, {"message": "give your name or a nickname (it has no visible characters)", "where": "writer"})
+        if not has_visible(body.description):
             raise HTTPException(422, {"message": "describe your tree in words before submitting", "where": "description"})
         return store.add_submission(body.domain, body.writer.strip(), tree_to_json(tree), body.description.strip())
 

@@ -9,7 +9,13 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from nl2policy.errors import UserError
+
 PACKAGE_DATA = Path(__file__).resolve().parent
+
+
+class CorpusMissing(UserError, FileNotFoundError):
+    """The corpus folder in use has no corpus in it."""
 
 
 def corpus_dir() -> Path:
@@ -17,5 +23,7 @@ def corpus_dir() -> Path:
     override = os.environ.get("NL2POLICY_CORPUS")
     path = Path(override) if override else PACKAGE_DATA / "corpus"
     if not (path / "vocabulary.json").is_file():
-        raise FileNotFoundError(f"no vocabulary.json in corpus folder {path} (check NL2POLICY_CORPUS)")
+        where = "NL2POLICY_CORPUS points to" if override else "the shipped corpus is missing from"
+        raise CorpusMissing(f"no corpus in {path} ({where} it: no vocabulary.json there); "
+                            + ("set NL2POLICY_CORPUS to a corpus folder or unset it" if override else "reinstall nl2policy"))
     return path

@@ -9,6 +9,8 @@ from typing import Optional
 
 import typer
 
+from nl2policy.limits import MAX_COUNT
+
 
 def register(app: typer.Typer) -> None:
     app.command("train-translator")(train_translator)
@@ -20,16 +22,18 @@ def train_translator(
     model: Optional[str] = typer.Option(None, help="Model name (default: the best model)"),
     seed: int = typer.Option(0),
     out: Optional[Path] = typer.Option(None, help="Folder to save into (default: $NL2POLICY_HOME/models)"),
-    workers: Optional[int] = typer.Option(None, min=1, help="Processes training ensemble members side by side "
+    workers: Optional[int] = typer.Option(None, min=1, max=MAX_COUNT, help="Processes training ensemble members side by side "
                                           "(default: one per CPU core); the trained networks do not depend on it"),
 ) -> None:
     """Train a translator on the whole shared corpus and save it as the domain's model (resumes
     from its checkpoint if a run was interrupted)."""
-    from nl2policy.console import domain_or_fail, err, fail, progress_bar
+    from nl2policy.console import domain_or_fail, err, fail, out_dir_or_fail, progress_bar
     from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
     from nl2policy.language.shipping import train_default
 
     domain_or_fail(domain)
+    if out is not None:
+        out_dir_or_fail(out)
     name = model or DEFAULT_MODEL
     if name not in MODELS:
         fail(f"unknown model {name!r}; known: {', '.join(MODELS)}")

@@ -9,6 +9,7 @@ from typing import Optional
 import typer
 
 from nl2policy.grid import ray_option_help
+from nl2policy.limits import MAX_CLI_STEPS, MAX_COUNT, MAX_EPISODES
 
 
 def register(app: typer.Typer) -> None:
@@ -21,11 +22,11 @@ def register(app: typer.Typer) -> None:
 def optimize(
     domain: str = typer.Option(..., help="taxi or highway"),
     tree: str = typer.Option(..., help="A tree as inline JSON or a path to a JSON file"),
-    steps: int = typer.Option(20_000, help="PPO env steps (whole rollouts: rounded up to a multiple of 512 for taxi, "
+    steps: int = typer.Option(20_000, max=MAX_CLI_STEPS, help="PPO env steps (whole rollouts: rounded up to a multiple of 512 for taxi, "
                                            "4,096 for highway on its twin, 256 on highway-env)"),
     seed: int = typer.Option(0),
     out: Path = typer.Option(Path("runs/optimize"), help="Output folder; holding a checkpoint, the run resumes"),
-    eval_episodes: Optional[int] = typer.Option(None, min=1, help="Episodes for the before/after returns (default: the domain's eval_episodes, domains/<name>.toml)"),
+    eval_episodes: Optional[int] = typer.Option(None, min=1, max=MAX_EPISODES, help="Episodes for the before/after returns (default: the domain's eval_episodes, domains/<name>.toml)"),
     polish: Optional[bool] = typer.Option(None, "--polish/--no-polish", help="Hill-climb the kept tree over questions and actions: on the exact model (taxi), or on common sampled scenes of the fast simulator (highway); default on where the domain has either"),
     simulator: str = typer.Option("fast", help="Train on the domain's fast simulator (highway: the vectorized twin) or on its reference env (highway-env); returns are always the reference env's"),
 ) -> None:
@@ -64,14 +65,14 @@ def optimize(
 
 def policy_experiment(
     domain: str = typer.Option(..., help="taxi or highway"),
-    steps: int = typer.Option(12_000, min=1, help="PPO env steps per run"),
-    candidates: int = typer.Option(15, min=1, help="Most frequent corpus trees to rank"),
-    best: int = typer.Option(5, min=1, help="Best trees (by initial return) to train"),
-    select_episodes: int = typer.Option(100, min=1, help="Episodes per candidate tree when ranking"),
-    tree_seeds: int = typer.Option(2, min=1),
-    baseline_seeds: int = typer.Option(3, min=1),
+    steps: int = typer.Option(12_000, min=1, max=MAX_CLI_STEPS, help="PPO env steps per run"),
+    candidates: int = typer.Option(15, min=1, max=MAX_COUNT, help="Most frequent corpus trees to rank"),
+    best: int = typer.Option(5, min=1, max=MAX_COUNT, help="Best trees (by initial return) to train"),
+    select_episodes: int = typer.Option(100, min=1, max=MAX_EPISODES, help="Episodes per candidate tree when ranking"),
+    tree_seeds: int = typer.Option(2, min=1, max=MAX_COUNT),
+    baseline_seeds: int = typer.Option(3, min=1, max=MAX_COUNT),
     out: Path = typer.Option(Path("results/policy")),
-    workers: int = typer.Option(1, min=1, help="Runs side by side in forked processes on this machine"),
+    workers: int = typer.Option(1, min=1, max=MAX_COUNT, help="Runs side by side in forked processes on this machine"),
     ray: Optional[str] = typer.Option(None, "--ray", help=ray_option_help()),
 ) -> None:
     """Table 2: tree-initialized DDT vs random DDT vs MLP (resumable; finished runs are skipped)."""
@@ -131,7 +132,7 @@ def policy_experiment(
 
 
 def policy_fidelity(
-    states: int = typer.Option(10_000, min=1, help="Sampled states per distribution"),
+    states: int = typer.Option(10_000, min=1, max=MAX_EPISODES, help="Sampled states per distribution"),
     out: Path = typer.Option(Path("results/policy")),
     domain: Optional[list[str]] = typer.Option(None, help="Only these domains (repeatable); writes fidelity_<domains>.md"),
 ) -> None:
