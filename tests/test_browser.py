@@ -110,6 +110,45 @@ def test_specify_edit_optimize(server, browser):
     page.close()
 
 
+def _act(tree: dict, situation: dict) -> str:
+    while "do" not in tree:
+        tree = tree["yes"] if situation[tree["if"]] else tree["no"]
+    return tree["do"]
+
+
+def test_specify_asks_about_situations_and_each_answer_changes_the_tree(server, browser):
+    """Describe vaguely; the page asks what to do in a situation; answering with an action the
+    tree does not take there redraws the tree with the changed boxes marked, twice; then the
+    tree is optimized."""
+    url, _ = server
+    page = browser.new_page(viewport={"width": 1100, "height": 900})
+    page.goto(url + "/")
+    page.select_option("#domain", "taxi")
+    page.fill("#description", "Drive around and make money, but mind the traffic.")
+    page.click("#translate")
+    page.wait_for_selector("#tree svg g[data-slot='0']", timeout=120_000)
+    for turn in range(2):
+        page.wait_for_selector("#question-choices button[data-do]", timeout=60_000)
+        assert "What should it do?" in page.inner_text("#question-text")
+        tree, situation = page.evaluate("[spec.tree, asked.situation]")
+        other = next(a for a in ("go_airport", "go_village", "go_city", "wait") if a != _act(tree, situation))
+        page.click(f"#question-choices button[data-do='{other}']")
+        page.wait_for_function("document.querySelector('#question-note').textContent !== ''", timeout=60_000)
+        new_tree = page.evaluate("spec.tree")
+        assert new_tree != tree and _act(new_tree, situation) == other
+        assert page.locator("#tree g.changed").count() >= 1
+        assert "changed" in page.inner_text("#question-note")
+    if page.locator("#skip-question").count():
+        page.click("#skip-question")
+        assert page.locator("#questions").is_hidden()
+    shoot(page, "specify-questions")
+    page.fill("#steps", "512")
+    page.click("#optimize")
+    page.wait_for_url("**/optimize?run=*")
+    page.wait_for_function("['running', 'finished'].includes(document.querySelector('#status').textContent)", timeout=120_000)
+    page.close()
+
+
 def test_collect_build_submit_and_export(server, browser):
     url, base = server
     page = browser.new_page(viewport={"width": 1100, "height": 1700})  # the drag's source and target both in view

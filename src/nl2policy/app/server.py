@@ -36,6 +36,9 @@ LOW_CONFIDENCE = 0.5
 class TranslateIn(BaseModel):
     domain: str
     description: str = Field(..., max_length=MAX_DESCRIPTION)
+    answers: list[Any] = Field(default_factory=list, max_length=10,
+                               description='answers to the questions asked so far, in order: {"situation": {question: bool}, "do": action}')
+    max_questions: int = Field(3, ge=0, le=10, description="questions the translator may ask about this description")
 
 
 class TreeIn(BaseModel):
@@ -108,13 +111,13 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
     # ImportError), and a translation takes ~20 ms, so queueing them costs nothing.
     translate_lock = threading.Lock()
 
-    def translate(domain: str, text: str):
+    def translate(domain: str, text: str, answers: list, max_questions: int):
         if translator is not None:
-            return translator(domain, text)
+            return translator(domain, text, answers=answers, max_questions=max_questions) if answers else translator(domain, text)
         from nl2policy.language.translate import translate as real
 
         with translate_lock:
-            return real(domain, text)
+            return real(domain, text, answers=answers, max_questions=max_questions)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
@@ -157,10 +160,13 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
         if problem:
             raise HTTPException(422, {"message": problem, "where": "description"})
         try:
-            result = translate(body.domain, body.description)
-        except ValueError as exc:  # the translator's EmptyDescription: no words in it ("?!.,;")
+            result = translate(body.domain, body.description, body.answers, body.max_questions)
+        except ValueError as exc:  # EmptyDescription: no words in it ("?!.,;"); a bad answer; no tree fits them
+            from nl2policy.language.clarify import BadAnswer, NoTreeFits
             from nl2policy.language.translate import EmptyDescription
 
+            if isinstance(exc, (BadAnswer, NoTreeFits)):
+                raise HTTPException(422, {"message": str(exc), "where": "answers"}) from exc
             if not isinstance(exc, EmptyDescription):
                 raise
             raise HTTPException(422, {"message": "the description has no words to translate: say what the robot "
@@ -168,7 +174,9 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
         view = _tree_view(body.domain, result.tree, result.node_confidence)
         spec = store.add_spec(body.domain, body.description, view["tree"], result.confidence, list(result.warnings),
                               view["node_confidence"])
-        return {"spec_id": spec["id"], "confidence": result.confidence, "warnings": list(result.warnings), **view}
+        questions = [q.to_json() for q in getattr(result, "questions", [])]
+        return {"spec_id": spec["id"], "confidence": result.confidence, "warnings": list(result.warnings),
+                "questions": questions, **view}
 
     @app.post("/api/validate")
     def validate(body: TreeIn) -> dict:

@@ -47,11 +47,17 @@ def train_translator(
 def translate_cmd(
     text: Optional[str] = typer.Argument(None, help="The description to translate"),
     domain: str = typer.Option(..., help="taxi or highway"),
-    json_out: bool = typer.Option(False, "--json", help='Print {"tree", "confidence", "warnings"} as JSON'),
+    json_out: bool = typer.Option(False, "--json", help='Print {"tree", "confidence", "warnings", "questions"} as JSON'),
     jsonl: Optional[Path] = typer.Option(None, "--jsonl", help="File with one JSON object per line holding a description"),
     model: Optional[str] = typer.Option(None, help="Model name (default: the best model)"),
+    answer: Optional[list[str]] = typer.Option(None, "--answer", help='Your answer to a question it asked, as JSON: '
+                                               '\'{"situation": {...}, "do": "ACTION"}\' (repeatable, in the order asked)'),
+    interactive: bool = typer.Option(False, "--interactive", help="Answer its questions on the terminal (Enter skips), "
+                                                                 "then print the final tree"),
+    max_questions: int = typer.Option(3, min=0, max=MAX_COUNT, help="Questions it may ask about one description"),
 ) -> None:
-    """Translate a description into a policy tree with its confidence."""
+    """Translate a description into a policy tree with its confidence; where it is unsure, it asks
+    what the robot should do in a situation, and each answer holds the tree to it."""
     from nl2policy.console import console, description_or_fail, domain_or_fail, err, exit_without_teardown, fail
     from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
 
@@ -59,6 +65,9 @@ def translate_cmd(
     name = model or DEFAULT_MODEL
     if name not in MODELS:
         fail(f"unknown model {name!r}; known: {', '.join(MODELS)}")
+    answers = [_answer_arg(a, i) for i, a in enumerate(answer or [], 1)]
+    if jsonl is not None and (answers or interactive):
+        fail("--answer and --interactive are for one description, not --jsonl")
     if jsonl is not None:
         if text is not None:
             fail("give either a TEXT argument or --jsonl FILE, not both")
@@ -86,6 +95,7 @@ def translate_cmd(
         description_or_fail(text)
     import torch
 
+    from nl2policy.language.clarify import BadAnswer, NoTreeFits
     from nl2policy.language.translate import EmptyDescription, translate
     from nl2policy.trees import to_text
 
@@ -96,10 +106,15 @@ def translate_cmd(
     torch.set_num_threads(1)
     from nl2policy.paths import HomeError
 
-    try:
-        result = translate(domain, text, name)
-    except (EmptyDescription, HomeError) as exc:  # HomeError: no model, and nowhere to train one
-        fail(str(exc))
+    def run(given: list) -> "object":
+        try:
+            return translate(domain, text, name, answers=given, max_questions=max_questions)
+        except (EmptyDescription, HomeError, BadAnswer, NoTreeFits) as exc:  # HomeError: no model, and nowhere to train one
+            fail(str(exc))
+
+    result = run(answers)
+    if interactive:
+        result = _ask_on_terminal(run, answers, result, d)
     if json_out:
         print(json.dumps(result.to_json()))
     else:
@@ -107,7 +122,43 @@ def translate_cmd(
         console.print(f"confidence: {result.confidence:.2f}", highlight=False)
         for w in result.warnings:
             err.print(f"[yellow]warning:[/] {w}", highlight=False)
+        for q in result.questions:
+            err.print(f"question: {q.text} Answer with --answer '{json.dumps({'situation': dict(q.situation), 'do': 'ACTION'})}', "
+                      f"ACTION one of {', '.join(a for a, _ in q.choices)}", highlight=False, soft_wrap=True)
     exit_without_teardown()
+
+
+def _answer_arg(raw: str, i: int):
+    """One --answer value as JSON (its contents are checked by the translator)."""
+    from nl2policy.console import fail
+
+    try:
+        return json.loads(raw)
+    except json.JSONDecodeError as exc:
+        fail(f"--answer {i} is not JSON ({exc.msg}); write '{{\"situation\": {{...}}, \"do\": \"ACTION\"}}'")
+
+
+def _ask_on_terminal(run, answers: list, result, d):
+    """Ask each question on the terminal with numbered choices until none is asked or the user
+    presses Enter; the tree after each answer is shown."""
+    from rich.prompt import Prompt
+
+    from nl2policy.console import err
+    from nl2policy.trees import to_text
+
+    while result.questions:
+        q = result.questions[0]
+        err.print(f"\n[bold]{q.text}[/]", highlight=False)
+        for n, (_, words) in enumerate(q.choices, 1):
+            err.print(f"  {n}. {words}", highlight=False)
+        choice = Prompt.ask("your choice (Enter skips)", choices=[str(n) for n in range(1, len(q.choices) + 1)] + [""],
+                            default="", show_choices=False, console=err)
+        if not choice:
+            break
+        answers.append({"situation": dict(q.situation), "do": q.choices[int(choice) - 1][0]})
+        result = run(answers)
+        err.print(to_text(result.tree, d.vocab), highlight=False)
+    return result
 
 
 def _jsonl_line(domain: str, name: str, line: str, lineno: int) -> dict:

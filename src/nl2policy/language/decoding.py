@@ -9,7 +9,7 @@ each node's probability comes back with the tree, for the confidence score.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Optional, Sequence
+from typing import TYPE_CHECKING, Callable, Optional, Sequence
 
 import torch
 
@@ -25,20 +25,37 @@ if TYPE_CHECKING:
 MAX_STEPS = 15
 
 
+Allow = Callable[[tuple[str, ...], Slot], Optional[frozenset[str]]]
+"""An extra restriction on decoding: for the tokens so far and the open slot, the tokens that
+may go there (None: any the grammar allows). Clarifying answers are one (clarify.py)."""
+Hypothesis = tuple[Optional[Tree], dict[int, float], float]
+"""A finished hypothesis: its tree (None if no tree fits), each node's probability, its score."""
+
+
 def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str],
                 found: Optional[Sequence[Findings]] = None) -> list[tuple[Tree, dict[int, float]]]:
+    """The best tree of each text (see `search`)."""
+    return [hyps[0][:2] for hyps in search(model, batch, texts, found)]
+
+
+def search(model: TrainedTranslator, batch: Batch, texts: list[str], found: Optional[Sequence[Findings]] = None,
+           allow: Optional[Sequence[Optional[Allow]]] = None, width: Optional[int] = None) -> list[list[Hypothesis]]:
     """Beam search under the grammar mask over the members' averaged step probabilities
     (`model.beam` hypotheses per description; 1 is greedy). A tree's score is the sum of its
     nodes' log-probabilities, so a subtree the text does not support costs its every node
     (the reported probabilities stay the model's own). With a `findings_cost`, the score also
     adds that many times the log-probability the text's findings (`found`, one per text; read
     here when not given) give the tree's question set, action set and root, paid part by part as
-    the tree takes shape, so the beam explores the trees the text was read to describe."""
+    the tree takes shape, so the beam explores the trees the text was read to describe.
+
+    `allow` (one per text, or None) restricts each text's hypotheses further as they grow, so a
+    tree that breaks it is never built; `width` overrides the beam. Returns each text's finished
+    hypotheses, best first; where none is left, one (None, {}, -inf)."""
     vocab = get_domain(model.domain).vocab
     names = model.tree_tokens
     index = {t: i for i, t in enumerate(names)}
     findings_cost = model.decoding("findings_cost")
-    B, K = len(texts), max(1, model.beam or model.cfg.beam)
+    B, K = len(texts), max(1, width or model.beam or model.cfg.beam)
     if not findings_cost or model.findings is None:
         found = None
     elif found is None:
@@ -62,6 +79,7 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str],
     # for every hypothesis at every step
     slot_after: dict[tuple[str, ...], Optional[Slot]] = {}
     allowed: dict[Optional[Slot], torch.Tensor] = {None: torch.arange(len(names)) == 0}  # finished: a placeholder
+    restricted: dict[tuple[int, tuple[str, ...]], Optional[torch.Tensor]] = {}
     for step in range(MAX_STEPS):
         slots = []
         for prefix in map(tuple, prefixes):
@@ -75,6 +93,16 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str],
                 allowed[s] = torch.zeros(len(names), dtype=torch.bool)
                 allowed[s][[index[a] for a in allowed_tokens(s, vocab)]] = True
         mask = torch.stack([allowed[s] for s in slots])  # a finished hypothesis continues at no cost
+        if allow is not None:
+            for r, (prefix, s) in enumerate(zip(prefixes, slots)):
+                rule = allow[r // K]
+                key = (r // K, tuple(prefix))
+                if rule is not None and s is not None:
+                    if key not in restricted:
+                        only = rule(key[1], s)
+                        restricted[key] = None if only is None else torch.tensor([t in only for t in names])
+                    if restricted[key] is not None:
+                        mask[r] = mask[r] & restricted[key]
         parent = torch.tensor([-1 if s is None else s.parent for s in slots])
         branch = torch.tensor([0 if s is None else s.branch for s in slots])
         logits = state.step(parent, branch)  # (members, B*K, tokens)
@@ -107,11 +135,16 @@ def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str],
             used, charged = used[source].clone(), charged[source]
             live = torch.tensor([slots[src] is not None for src in source.tolist()])
             used[torch.arange(B * K)[live], choice[live]] = True
-    trees = [from_tokens(p, vocab) if p and next_slot(p, vocab) is None else None for p in prefixes]
     if found is not None:  # those that finished at the last step
         score = score + findings_cost * (absent.repeat_interleave(K, 0) * ~used * ~charged[:, None]).sum(-1).view(B, K)
-    top = score.argmax(-1)  # beams stay sorted, but finished ones may have been overtaken
-    return [(trees[b * K + int(k)], probs[b * K + int(k)]) for b, k in enumerate(top)]
+    flat = score.view(-1).tolist()
+    trees = [from_tokens(p, vocab) if math.isfinite(flat[r]) and p and next_slot(p, vocab) is None else None
+             for r, p in enumerate(prefixes)]
+    out = []
+    for b in range(B):  # beams stay sorted, but finished ones may have been overtaken
+        rows = sorted((r for r in range(b * K, b * K + K) if trees[r] is not None), key=lambda r: -flat[r])
+        out.append([(trees[r], probs[r], flat[r]) for r in rows] or [(None, {}, -math.inf)])
+    return out
 
 
 class DecoderState:

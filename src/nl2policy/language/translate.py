@@ -17,11 +17,13 @@ import sys
 import threading
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Any, Callable, Optional, Sequence
 
 import torch
 
 from nl2policy.domains import get_domain
+from nl2policy.language.clarify import (ASK_BELOW, CANDIDATES, MAX_QUESTIONS, Answer, BadAnswer, NoTreeFits, Question,
+                                        allow_for, best_question, parse_answers, question_for)
 from nl2policy.language.findings import Findings, FindingsModel, root_label
 from nl2policy.language.models.config import DEFAULT_MODEL, ModelConfig
 from nl2policy.language.models.pretrained import MiniLMCache
@@ -47,9 +49,11 @@ class Translation:
     confidence: float
     warnings: list[str] = field(default_factory=list)
     node_confidence: dict[int, float] = field(default_factory=dict)  # grid slot -> probability
+    questions: list[Question] = field(default_factory=list)  # what to ask the user next (clarify.py)
 
     def to_json(self) -> dict:
-        return {"tree": tree_to_json(self.tree), "confidence": round(self.confidence, 4), "warnings": list(self.warnings)}
+        return {"tree": tree_to_json(self.tree), "confidence": round(self.confidence, 4), "warnings": list(self.warnings),
+                "questions": [q.to_json() for q in self.questions]}
 
 
 SHIPPED_DIR = Path(__file__).resolve().parent.parent / "data" / "models"
@@ -154,22 +158,77 @@ def _asks(domain: str, question: str) -> str:
     return get_domain(domain).vocab.questions[question].split("?")[0].lower()
 
 
-def translate(domain: str, text: str, name: str = DEFAULT_MODEL) -> Translation:
-    """Translate one description into a valid tree of `domain`, with confidence and warnings."""
+def translate(domain: str, text: str, name: str = DEFAULT_MODEL, answers: Sequence[Any] = (),
+              max_questions: int = MAX_QUESTIONS) -> Translation:
+    """Translate one description into a valid tree of `domain`, with confidence, warnings and,
+    where it is unsure, a question about a situation (clarify.py). `answers` are the user's
+    answers to the questions asked so far, in order ({"situation": ..., "do": ACTION}): the tree
+    returned acts as each says. Raises EmptyDescription, BadAnswer (an unknown action, a situation
+    the domain forbids or that was not asked, a contradiction) or NoTreeFits."""
     get_domain(domain)
     if not isinstance(text, str) or not tokenize(text):
         raise EmptyDescription("the description is empty: write what the policy should do")
-    loaded = get_model(domain, name)
+    parsed = parse_answers(domain, answers, max_questions)
+    return translate_with(get_model(domain, name), domain, text, parsed, max_questions)
+
+
+def translate_with(loaded: LoadedModel, domain: str, text: str, answers: Sequence[Answer] = (),
+                   max_questions: int = MAX_QUESTIONS, check_asked: bool = True) -> Translation:
+    """`translate` with a loaded model and checked answers. `check_asked`: replay the questions
+    and refuse an answer to a situation that was not the one asked at its turn (a caller that
+    asked them itself, like the simulated user, may skip it)."""
     found = loaded.translator.read_findings([text])  # read once: decoding weighs it, the warnings quote it
-    tree, node_probs = loaded.translator.predict([text], found=found)[0]
-    seq_prob = tree_probability(node_probs)
-    factor, warnings = check_topic(domain, text, loaded.lexicon)
-    confidence = max(0.0, min(1.0, seq_prob * factor))
+    factor, warnings = check_topic(domain, text, loaded.lexicon) if loaded.lexicon else (1.0, [])
+    if check_asked:
+        for i, answer in enumerate(answers):
+            asked = _step(loaded, domain, text, found, answers[:i], factor, max_questions)[3]
+            if asked is None or asked.situation != answer.situation:
+                raise BadAnswer(f"answer {i + 1} is about a situation that was not asked "
+                                + ("(nothing was asked there)" if asked is None else f"(the question was: {asked.text})"))
+    tree, node_probs, confidence, question = _step(loaded, domain, text, found, answers, factor, max_questions)
     if confidence < LOW_CONFIDENCE:
         warnings.append(f"low confidence ({confidence:.2f}): check the tree before using it")
     if found is not None and factor == 1.0:  # off-topic text: its findings mean nothing
         warnings += disagreements(domain, tree, found[0])
-    return Translation(tree, confidence, warnings, {k: v * factor for k, v in node_probs.items()})
+    return Translation(tree, confidence, warnings, {k: v * factor for k, v in node_probs.items()},
+                       [question] if question else [])
+
+
+def _step(loaded: LoadedModel, domain: str, text: str, found: Optional[list[Findings]], answers: Sequence[Answer],
+          factor: float, max_questions: int) -> tuple[Tree, dict[int, float], float, Optional[Question]]:
+    """The tree, its node probabilities, its confidence and the next question, given answers.
+    Without answers this is the plain translation (the model's beam; confidence = the tree's
+    probability). With answers the tree is the best of a wide beam held to them, and its
+    confidence is its share of that beam's weight: how sure the model is of it once they hold."""
+    model, own = loaded.translator, found[0] if found else None
+    allow = allow_for(domain, answers)
+    candidates = None
+    if not answers:
+        tree, node_probs = model.predict([text], found=found)[0]
+        confidence = tree_probability(node_probs) * factor
+    else:
+        candidates = model.hypotheses(text, own, allow, width=CANDIDATES)
+        tree, node_probs, _ = candidates[0]
+        if tree is None:
+            raise NoTreeFits("no tree of at most 3 questions on a path acts as all the answers say; "
+                             "check the answers, or edit the tree by hand")
+        confidence = _share(candidates) * factor
+    question = None
+    # the first question only where the (calibrated) confidence is low; once the user is being
+    # asked, until the plausible trees agree in every situation or the questions are spent: the
+    # share of a truncated beam is no calibrated probability (a wrong tree held 0.6-0.9 of it)
+    unsure = bool(answers) or confidence < ASK_BELOW
+    if unsure and len(answers) < max_questions and factor == 1.0:
+        candidates = candidates or model.hypotheses(text, own, None, width=CANDIDATES)
+        situation = best_question(domain, candidates, answers)
+        question = question_for(domain, situation) if situation is not None else None
+    return tree, node_probs, max(0.0, min(1.0, confidence)), question
+
+
+def _share(hypotheses: list) -> float:
+    """The first hypothesis's share of the beam's weight (scores are log-probabilities)."""
+    top = hypotheses[0][2]
+    return 1.0 / sum(math.exp(h[2] - top) for h in hypotheses)
 
 
 def disagreements(domain: str, tree: Tree, found: Findings) -> list[str]:

@@ -12,7 +12,7 @@ from typing import Optional, Sequence
 import torch
 
 from nl2policy.domains import get_domain
-from nl2policy.language.decoding import beam_search
+from nl2policy.language.decoding import Allow, Hypothesis, beam_search, search
 from nl2policy.language.findings import Findings, FindingsModel
 from nl2policy.language.models.config import ModelConfig
 from nl2policy.language.models.network import Batch, Translator, build_network
@@ -101,6 +101,16 @@ class TrainedTranslator:
             part = None if found is None else list(found[i:i + batch_size])
             out += beam_search(self, collate([self.encode(t) for t in chunk]), chunk, part)
         return out
+
+    @torch.inference_mode()
+    def hypotheses(self, text: str, found: Optional[Findings] = None, allow: Optional[Allow] = None,
+                   width: Optional[int] = None) -> list[Hypothesis]:
+        """One text's finished hypotheses, best first (decoding.search): `allow` restricts the
+        trees built, `width` sets the beam."""
+        for net in self.nets:
+            if net.training:
+                net.eval()
+        return search(self, collate([self.encode(text)]), [text], None if found is None else [found], [allow], width)[0]
 
     def read_findings(self, texts: Sequence[str]) -> Optional[list[Findings]]:
         """What the texts say about their trees (findings.py), or None for a model without

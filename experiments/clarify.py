@@ -1,0 +1,181 @@
+"""The simulated user: translate each description, answer every question the translator asks from
+the gold tree, and score the tree after 0, 1, 2 ... answers.
+
+    .venv/bin/python -m experiments.clarify --domain taxi --data FILE.jsonl --max-questions 3 --out DIR
+    .venv/bin/python -m experiments.clarify --domain taxi --folds NETS --max-questions 3 --out DIR
+
+FILE holds {"description", "tree"} rows, translated by --model (a model file; default: the shipped
+one). --folds decodes instead the fold networks a translation experiment kept (--keep-networks),
+each on its own held-out descriptions: with the folds of new writers with new trees (NWNT), the
+translator has seen neither the writer nor the tree of any description it is asked about.
+
+Writes DIR/summary.json (`exact_by_questions` and `policy_by_questions`: accuracy in % after at
+most 0, 1, ... answers; `mean_questions`; `asked_none_share` and `asked_none_exact` in %; `n`; the
+same by the number of questions in the gold tree and by fold), DIR/summary.md and DIR/rows.jsonl
+(each description's questions, answers and trees).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections import defaultdict
+from pathlib import Path
+from typing import Optional
+
+import torch
+
+import experiments.translation.baselines  # noqa: F401  (registers the lab's model names)
+from experiments.translation.evaluate import PROTOCOL_ROUNDS
+from nl2policy.domains import get_domain
+from nl2policy.language.clarify import Answer, agrees, situations
+from nl2policy.language.corpus import load_corpus
+from nl2policy.language.findings import FindingsModel
+from nl2policy.language.models.config import MODELS, ModelConfig
+from nl2policy.language.models.pretrained import MiniLMCache
+from nl2policy.language.translate import LoadedModel, find_model, translate_with
+from nl2policy.language.translator import TrainedTranslator
+from nl2policy.trees import Tree, parse_tree, to_tokens
+from nl2policy.trees.parse import validate
+
+
+def load_networks(path: Path, cache: MiniLMCache) -> LoadedModel:
+    """A shipped model file or a fold's kept networks (whose config is its model name's)."""
+    data = torch.load(path, weights_only=False)
+    cfg = ModelConfig(**data["cfg"]) if "cfg" in data else MODELS[data["name"]]
+    translator = TrainedTranslator.from_states(data["domain"], data["name"], cfg, data["words"], data["nets"], cache)
+    if data.get("findings") is not None:
+        translator.findings = FindingsModel.from_state(data["findings"], cache)
+    lexicon = {d: set(ws) for d, ws in data["lexicon"].items()} if data.get("lexicon") else {}
+    return LoadedModel(translator, lexicon)
+
+
+def questions_in(tree: Tree, domain: str) -> int:
+    return sum(t in get_domain(domain).vocab.questions for t in to_tokens(tree))
+
+
+def simulate(loaded: LoadedModel, domain: str, text: str, gold: Tree, max_questions: int) -> dict:
+    """Answer each question from `gold` until none is asked or `max_questions` were."""
+    d = get_domain(domain)
+    allowed = set(situations(domain))
+    answers: list[Answer] = []
+    result = translate_with(loaded, domain, text, answers, max_questions, check_asked=False)
+    trees, asked = [result.tree], []
+    confidence = [result.confidence]
+    while result.questions and len(answers) < max_questions:
+        question = result.questions[0]
+        assert question.situation in allowed, question.situation  # only situations the domain allows
+        answers.append(Answer(question.situation, gold.act(dict(question.situation))))
+        asked.append(question.text)
+        result = translate_with(loaded, domain, text, answers, max_questions, check_asked=False)
+        assert agrees(result.tree, answers), "a tree returned after answers acts otherwise"
+        trees.append(result.tree)
+        confidence.append(result.confidence)
+    for tree in trees:
+        validate(tree, d.vocab)
+    trees += [trees[-1]] * (max_questions + 1 - len(trees))
+    return {"questions": asked, "answers": [a.to_json() for a in answers], "confidence": [round(c, 4) for c in confidence],
+            "trees": [" ".join(to_tokens(t)) for t in trees], "gold": " ".join(to_tokens(gold)),
+            "exact": [t == gold for t in trees], "policy": [d.same_policy(t, gold) for t in trees],
+            "gold_questions": questions_in(gold, domain)}
+
+
+def summarize(rows: list[dict], max_questions: int) -> dict:
+    n = len(rows)
+    pct = lambda xs: round(100 * sum(xs) / len(xs), 2) if xs else None
+    none = [r for r in rows if not r["questions"]]
+    out = {"n": n, "exact_by_questions": [pct([r["exact"][j] for r in rows]) for j in range(max_questions + 1)],
+           "policy_by_questions": [pct([r["policy"][j] for r in rows]) for j in range(max_questions + 1)],
+           "mean_questions": round(sum(len(r["questions"]) for r in rows) / n, 3) if n else None,
+           "asked_none_share": pct([not r["questions"] for r in rows]), "asked_none_exact": pct([r["exact"][0] for r in none])}
+    groups = defaultdict(list)
+    for r in rows:
+        groups[min(r["gold_questions"], 5)].append(r)
+    out["by_tree_questions"] = {("5+" if k == 5 else str(k)): {
+        "n": len(g), "exact_by_questions": [pct([r["exact"][j] for r in g]) for j in range(max_questions + 1)],
+        "mean_questions": round(sum(len(r["questions"]) for r in g) / len(g), 2)} for k, g in sorted(groups.items())}
+    return out
+
+
+def markdown(summary: dict, command: str, max_questions: int) -> str:
+    heads = " | ".join(f"after {j}" for j in range(max_questions + 1))
+    bar = "|---" * (max_questions + 4)
+    lines = [f"# Asking when unsure: the simulated user\n", f"Made by: `{command}`  ",
+             "Each question is answered from the gold tree; accuracy (%) of the tree after at most k answers.\n",
+             f"| | n | {heads} | questions asked (mean) |", bar + "|",
+             f"| exact | {summary['n']} | " + " | ".join(f"{x:.1f}" for x in summary["exact_by_questions"])
+             + f" | {summary['mean_questions']:.2f} |",
+             f"| policy | {summary['n']} | " + " | ".join(f"{x:.1f}" for x in summary["policy_by_questions"]) + " | |", "",
+             f"Nothing asked for {summary['asked_none_share']:.1f} % of descriptions; of those, "
+             f"{summary['asked_none_exact'] if summary['asked_none_exact'] is not None else '-'} % exact.\n",
+             "By the number of questions in the gold tree (exact %):\n",
+             f"| questions in the tree | n | {heads} | asked (mean) |", bar + "|"]
+    for k, g in summary["by_tree_questions"].items():
+        lines.append(f"| {k} | {g['n']} | " + " | ".join(f"{x:.1f}" for x in g["exact_by_questions"]) + f" | {g['mean_questions']:.2f} |")
+    if "by_fold" in summary:
+        lines += ["", "By fold (exact % after 0 and after at most "
+                  f"{max_questions} answers):", "", "| fold | n | after 0 | after max | asked (mean) |", "|---|---:|---:|---:|---:|"]
+        for fold, f in summary["by_fold"].items():
+            lines.append(f"| {fold} | {f['n']} | {f['exact_by_questions'][0]:.1f} | {f['exact_by_questions'][-1]:.1f} | "
+                         f"{f['mean_questions']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Optional[list[str]] = None) -> None:
+    parser = argparse.ArgumentParser(description="Simulated-user evaluation of asking when unsure.")
+    parser.add_argument("--domain", required=True)
+    parser.add_argument("--data", type=Path, help='JSONL of {"description", "tree"} rows')
+    parser.add_argument("--model", type=Path, help="model file for --data (default: the shipped model)")
+    parser.add_argument("--folds", type=Path, help="a --keep-networks folder: each fold's networks on its own test specs")
+    parser.add_argument("--fold-model", default=None, help="only the folds of this model name (default: all)")
+    parser.add_argument("--protocol", default="new", help="only the folds of this protocol (default: new)")
+    parser.add_argument("--max-questions", type=int, default=3)
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+    get_domain(args.domain)
+    if (args.data is None) == (args.folds is None):
+        parser.error("give --data FILE (with --model) or --folds DIR")
+    cache = MiniLMCache()
+    jobs: list[tuple[str, LoadedModel, list[tuple[str, Tree, str]]]] = []
+    if args.folds is not None:
+        specs = load_corpus(args.domain, rounds=PROTOCOL_ROUNDS[args.protocol])
+        paths = sorted(args.folds.glob(f"{args.domain}-{args.fold_model or '*'}-{args.protocol}-*.pt"))
+        if not paths:
+            parser.error(f"no {args.protocol} fold networks of {args.domain} in {args.folds}")
+        for path in paths:
+            saved = torch.load(path, weights_only=False)
+            jobs.append((path.stem, load_networks(path, cache),
+                         [(specs[i].description, specs[i].tree, specs[i].id) for i in saved["test"]]))
+    else:
+        vocab = get_domain(args.domain).vocab
+        rows = [json.loads(line) for line in args.data.read_text().splitlines() if line.strip()]
+        model = args.model or find_model(args.domain)
+        jobs.append(("data", load_networks(model, cache),
+                     [(r["description"], parse_tree(r["tree"], vocab), r.get("id", str(i))) for i, r in enumerate(rows)]))
+    args.out.mkdir(parents=True, exist_ok=True)
+    all_rows, by_fold = [], {}
+    with (args.out / "rows.jsonl").open("w") as fh:
+        for fold, loaded, items in jobs:
+            rows = []
+            for text, gold, key in items:
+                row = {"fold": fold, "id": key, **simulate(loaded, args.domain, text, gold, args.max_questions)}
+                fh.write(json.dumps(row) + "\n")
+                rows.append(row)
+            by_fold[fold] = summarize(rows, args.max_questions)
+            all_rows += rows
+            print(f"{fold}: exact {by_fold[fold]['exact_by_questions']}", file=sys.stderr)
+    summary = summarize(all_rows, args.max_questions)
+    if len(by_fold) > 1:
+        summary["by_fold"] = {k: {"n": v["n"], "exact_by_questions": v["exact_by_questions"],
+                                  "mean_questions": v["mean_questions"]} for k, v in by_fold.items()}
+    command = "python -m experiments.clarify " + " ".join(argv if argv is not None else sys.argv[1:])
+    summary["command"] = command
+    (args.out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    (args.out / "summary.md").write_text(markdown(summary, command, args.max_questions))
+    print((args.out / "summary.md").read_text())
+
+
+if __name__ == "__main__":
+    main()

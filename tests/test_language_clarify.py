@@ -1,0 +1,146 @@
+"""Asking when unsure (issue 42): questions only about situations the domain allows, in its words;
+every tree returned acts as every answer says (decoding is held to them, not a filter); bad
+answers are refused with a clear message by the library, the API and the CLI, and nothing is
+stored."""
+
+import json
+import random
+
+import pytest
+from fastapi.testclient import TestClient
+from typer.testing import CliRunner
+
+from nl2policy.app.server import create_app
+from nl2policy.cli import app as cli
+from nl2policy.domains import get_domain
+from nl2policy.language.clarify import (Answer, BadAnswer, NoTreeFits, agrees, parse_answers, situation_text,
+                                        situations)
+from nl2policy.language.corpus import load_corpus
+from nl2policy.language.translate import get_model, translate, translate_with
+from nl2policy.trees.parse import validate
+
+VAGUE = "Drive around and make money, but mind the traffic."
+
+
+def test_situations_are_exactly_the_ones_the_domain_allows():
+    for domain in ("taxi", "highway"):
+        d = get_domain(domain)
+        got = situations(domain)
+        assert len(got) == len(d.possible_answer_sets) == len(set(got))
+        assert all(d.is_possible(dict(s)) for s in got)
+    assert len(situations("taxi")) == 24  # one of three places, times 2 x 2 x 2
+
+
+def test_a_situation_is_told_in_the_domains_words_without_implied_facts():
+    s = dict(at_airport=False, at_village=True, at_city=False, has_passenger=False, heavy_traffic=True, long_wait=False)
+    text = situation_text("taxi", tuple(s.items()))
+    assert text == ("The taxi is at the village, the taxi is empty, the traffic to the city is heavy and the wait "
+                    "at the village is short. What should it do?")
+    lane = next(x for x in situations("highway") if dict(x)["in_left_lane"])
+    assert "left lane is not free" not in situation_text("highway", lane)  # the leftmost lane implies it
+
+
+@pytest.mark.parametrize("domain", ["taxi", "highway"])
+def test_every_question_is_about_an_allowed_situation_and_every_tree_agrees_with_the_answers(domain):
+    """Answer each question with a random action (not the tree's): the next tree must act so
+    there, whatever the model thought before."""
+    rng = random.Random(0)
+    loaded = get_model(domain)
+    d = get_domain(domain)
+    allowed = set(situations(domain))
+    asked_some = 0
+    for spec in load_corpus(domain, rounds=(2,))[:12]:
+        answers = []
+        result = translate_with(loaded, domain, spec.description, answers)
+        while result.questions:
+            q = result.questions[0]
+            assert q.situation in allowed and q.text.endswith("What should it do?")
+            assert [a for a, _ in q.choices] == d.vocab.action_ids
+            other = rng.choice([a for a in d.vocab.action_ids if a != result.tree.act(dict(q.situation))])
+            answers.append(Answer(q.situation, other))
+            result = translate_with(loaded, domain, spec.description, answers)  # replays and checks the questions
+            validate(result.tree, d.vocab)
+            assert agrees(result.tree, answers)
+            asked_some += 1
+    assert asked_some >= 3
+
+
+def test_a_confident_translation_asks_nothing():
+    spec = load_corpus("taxi")[0]
+    result = translate("taxi", spec.description)
+    assert result.confidence >= 0.6 and result.questions == []
+
+
+def test_answers_no_tree_can_follow_are_said_to_be_impossible():
+    """Parity of four facts needs four questions on a path; a tree has at most three."""
+    loaded = get_model("taxi")
+    d = get_domain("taxi")
+    answers = []
+    for s in situations("taxi"):
+        f = dict(s)
+        odd = (f["has_passenger"] + f["heavy_traffic"] + f["long_wait"] + f["at_city"]) % 2
+        answers.append(Answer(s, "wait" if odd else "go_city"))
+    assert len(answers) == len(d.possible_answer_sets)
+    with pytest.raises(NoTreeFits):
+        translate_with(loaded, "taxi", VAGUE, answers, max_questions=len(answers), check_asked=False)
+
+
+def _asked(domain="taxi", text=VAGUE):
+    q = translate(domain, text).questions[0]
+    return dict(q.situation)
+
+
+@pytest.mark.parametrize("bad,needle", [
+    (lambda s: [{"situation": s, "do": "fly"}], "unknown action"),
+    (lambda s: [{"situation": {**s, "at_airport": True, "at_city": True}, "do": "wait"}], "never has this situation"),
+    (lambda s: [{"situation": {k: v for k, v in s.items() if k != "long_wait"}, "do": "wait"}], "does not answer long_wait"),
+    (lambda s: [{"situation": {**s, "at_mars": True}, "do": "wait"}], "unknown question"),
+    (lambda s: [{"situation": s, "do": "wait"}, {"situation": s, "do": "go_city"}], "contradicts"),
+    (lambda s: [{"situation": {**s, "long_wait": not s["long_wait"]}, "do": "wait"}], "not asked"),
+    (lambda s: ["wait"], "expected"),
+    (lambda s: [{"situation": {**s, "long_wait": "yes"}, "do": "wait"}], "true or false"),
+])
+def test_bad_answers_are_refused_everywhere_and_nothing_is_stored(tmp_path, bad, needle):
+    answers = bad(_asked())
+    with pytest.raises(BadAnswer, match=needle):
+        translate("taxi", VAGUE, answers=answers)
+    client = TestClient(create_app(tmp_path / "a.sqlite", tmp_path, results_dir=tmp_path, max_parallel_runs=0),
+                        base_url="http://127.0.0.1")
+    with client:
+        r = client.post("/api/translate", json={"domain": "taxi", "description": VAGUE, "answers": answers})
+        assert r.status_code == 422 and needle in r.json()["detail"]["message"] and r.json()["detail"]["where"] == "answers"
+    import sqlite3
+
+    with sqlite3.connect(tmp_path / "a.sqlite") as db:
+        assert db.execute("SELECT COUNT(*) FROM specs").fetchone()[0] == 0
+    result = CliRunner().invoke(cli, ["translate", "--domain", "taxi", *sum((["--answer", json.dumps(a)] for a in answers), []), VAGUE])
+    assert result.exit_code == 2 and needle in result.stderr and "Traceback" not in result.output
+
+
+def test_a_malformed_answer_on_the_command_line_is_one_line():
+    result = CliRunner().invoke(cli, ["translate", "--domain", "taxi", "--answer", "{situation", VAGUE])
+    assert result.exit_code == 2 and result.stderr.startswith("error: --answer 1 is not JSON")
+
+
+def test_the_api_and_cli_return_questions_and_take_answers_back(tmp_path):
+    client = TestClient(create_app(tmp_path / "a.sqlite", tmp_path, results_dir=tmp_path, max_parallel_runs=0),
+                        base_url="http://127.0.0.1")
+    with client:
+        first = client.post("/api/translate", json={"domain": "taxi", "description": VAGUE}).json()
+        q = first["questions"][0]
+        assert set(q) == {"situation", "text", "choices"} and {c["do"] for c in q["choices"]} == set(get_domain("taxi").vocab.actions)
+        answer = {"situation": q["situation"], "do": "wait"}
+        second = client.post("/api/translate", json={"domain": "taxi", "description": VAGUE, "answers": [answer]}).json()
+    from nl2policy.trees import parse_tree
+
+    assert parse_tree(second["tree"], get_domain("taxi").vocab).act(q["situation"]) == "wait"  # acts as answered
+    out = CliRunner().invoke(cli, ["translate", "--domain", "taxi", "--json", "--answer", json.dumps(answer), VAGUE])
+    assert out.exit_code == 0, out.output
+    assert json.loads(out.stdout)["tree"] == second["tree"]
+    assert json.loads(CliRunner().invoke(cli, ["translate", "--domain", "taxi", "--json", VAGUE]).stdout)["questions"][0] == q
+
+
+def test_parse_answers_takes_at_most_max_questions():
+    s = _asked()
+    with pytest.raises(BadAnswer, match="at most 0"):
+        parse_answers("taxi", [{"situation": s, "do": "wait"}], max_questions=0)
