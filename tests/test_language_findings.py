@@ -72,3 +72,18 @@ def test_decoding_follows_the_findings_root_and_actions(one_torch_thread):
     assert any(t != s for t, s in zip(free, steered))  # the smoke model alone does not say "wait" everywhere
     model.findings_cost = 0.0
     assert [t for t, _ in model.predict(texts)] == free
+
+
+def test_a_batch_reads_and_decodes_each_text_as_it_reads_alone():
+    """Padding must not leak into a text's reading: the lab decodes folds in batches, the product
+    one text at a time, and both must give the same trees (the findings' BiGRU once read padding)."""
+    from nl2policy.language.corpus import load_corpus
+    from nl2policy.language.translate import get_model
+
+    model = get_model("highway").translator
+    texts = [s.description for s in load_corpus("highway", rounds=(2,))[:12]]
+    together = model.read_findings(texts)
+    for text, found in zip(texts, together):
+        alone = model.read_findings([text])[0]
+        assert all(abs(alone.asks[q] - found.asks[q]) < 1e-4 for q in alone.asks)
+    assert [t for t, _ in model.predict(texts)] == [model.predict([t])[0][0] for t in texts]

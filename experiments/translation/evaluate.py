@@ -22,7 +22,7 @@ from nl2policy.language.corpus import Spec, kfold, load_corpus, new_writer_folds
 from nl2policy.language.dataset import member_pairs
 from nl2policy.language.models.config import MODELS, networks_config
 from nl2policy.language.models.pretrained import MiniLMCache
-from nl2policy.language.findings import train_findings
+from nl2policy.language.findings import FindingsModel, train_findings
 from nl2policy.language.train import fit
 from nl2policy.language.translator import TrainedTranslator
 from nl2policy.language.translate import LOW_CONFIDENCE, tree_probability
@@ -82,6 +82,8 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
     pairs = member_pairs(domain, specs, train_idx, cfg, exclude=lambda tree: policy_key(domain, tree) in held)
     if reuse is not None:
         model = TrainedTranslator.from_states(domain, name, cfg, reuse["words"], reuse["nets"][:cfg.ensemble], cache)
+        if reuse.get("findings") is not None:  # the findings trained with these networks
+            model.findings = FindingsModel.from_state(reuse["findings"], cache)
     else:
         model = fit(domain, name, cfg, pairs, seed, cache=cache,
                     vocab_texts=[specs[i].description for i in train_idx], workers=workers)

@@ -28,6 +28,7 @@ import torch
 from torch import nn
 
 from nl2policy.domains import get_domain
+from nl2policy.language.models.network import _bigru_packed
 from nl2policy.language.models.pretrained import DIM, MiniLMCache
 from nl2policy.language.text import Token, split_sentences
 from nl2policy.trees import Tree
@@ -76,7 +77,9 @@ class FindingsNet(nn.Module):
     def forward(self, states: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """states (B, L+1, N, 384), mask (B, N) -> (label logits (B, Q+A), root logits (B, Q+A))."""
         x = torch.einsum("l,blnd->bnd", torch.softmax(self.mix, 0), states)
-        x, _ = self.rnn(self.drop(self.norm(x)))
+        # packed: a text's reading must not depend on the longer texts beside it in a batch (the
+        # backward direction would start in their padding), so a batch reads as one text alone does
+        x = _bigru_packed(self.rnn, self.drop(self.norm(x)), mask.sum(1))
         x = self.drop(x)
         att = torch.einsum("bnh,kh->bkn", x, self.queries).masked_fill(~mask[:, None, :], -1e9)
         pooled = torch.einsum("bkn,bnh->bkh", torch.softmax(att, -1), x)  # (B, labels+1, h)
