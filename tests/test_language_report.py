@@ -102,11 +102,13 @@ def test_the_summary_command_reads_several_runs_files_and_refuses_a_missing_one(
 def test_experiment_never_runs_a_fold_twice(tmp_path, monkeypatch):
     from experiments.translation import evaluate
 
-    calls, workers = [], set()
+    calls, workers, held = [], set(), set()
 
-    def fake_fold(domain, specs, train_idx, test_idx, name, seed, cache, n_workers, keep=None, reuse=None):
+    def fake_fold(domain, specs, train_idx, test_idx, name, seed, cache, n_workers, keep=None, reuse=None,
+                  hold_test_trees=False):
         calls.append((domain, name, tuple(test_idx)))
         workers.add(n_workers)
+        held.add(hold_test_trees)
         return {"n": len(test_idx), "valid": len(test_idx), "tree_acc": 0.5, "token_acc": 0.5, "policy_acc": 0.5,
                 "train_pairs": len(train_idx), "seconds": 0.0}
 
@@ -115,6 +117,7 @@ def test_experiment_never_runs_a_fold_twice(tmp_path, monkeypatch):
     evaluate.run_experiment(plan, tmp_path, workers=2)
     assert len(calls) == 10 == len(set(calls))
     assert workers == {2}  # each fold's training gets the worker processes asked for
+    assert held == {False}  # CV holds out descriptions, not trees: random synthetic trees stay as drawn
     evaluate.run_experiment(plan, tmp_path)  # resuming a finished experiment runs nothing
     assert len(calls) == 10
     records = [json.loads(line) for line in (tmp_path / "runs.jsonl").read_text().splitlines()]

@@ -20,6 +20,7 @@ from statistics import mean, pstdev
 from typing import Iterable, Optional, Sequence
 
 from experiments.translation.evaluate import DECODING_ALTERNATIVES, read_runs
+from nl2policy.language.clarify import ASK_BELOW
 from nl2policy.language.models.config import DEFAULT_MODEL
 from nl2policy.language.translate import LOW_CONFIDENCE
 
@@ -121,8 +122,9 @@ def reliability(runs: Sequence[dict]) -> list[str]:
     if not groups:
         return []
     heads = [f"{lo:.1f}-{min(hi, 1.0):.1f}" for lo, hi in zip(BINS, BINS[1:])]
-    lines = ["| domain | model | protocol | " + " | ".join(heads) + f" | acc at >= {LOW_CONFIDENCE} | flagged |",
-             "|---|---|---" + "|---:" * (len(heads) + 2) + "|"]
+    lines = ["| domain | model | protocol | " + " | ".join(heads) + f" | acc at >= {LOW_CONFIDENCE} | flagged |"
+             f" acc at >= {ASK_BELOW} | share at >= {ASK_BELOW} |",
+             "|---|---|---" + "|---:" * (len(heads) + 4) + "|"]
     for (domain, model, protocol), items in sorted(groups.items()):
         cells = []
         for lo, hi in zip(BINS, BINS[1:]):
@@ -130,8 +132,43 @@ def reliability(runs: Sequence[dict]) -> list[str]:
             cells.append(f"{100 * sum(inside) / len(inside):.0f} ({len(inside)})" if inside else "- (0)")
         sure = [ok for c, ok in items if c >= LOW_CONFIDENCE]
         flagged = 100 * (len(items) - len(sure)) / len(items)
+        high = [ok for c, ok in items if c >= ASK_BELOW]
         lines.append(f"| {domain} | {model} | {protocol} | " + " | ".join(cells) + " | "
-                     + (f"{100 * sum(sure) / len(sure):.1f}" if sure else "-") + f" | {flagged:.1f}% |")
+                     + (f"{100 * sum(sure) / len(sure):.1f}" if sure else "-") + f" | {flagged:.1f}% | "
+                     + (f"{100 * sum(high) / len(high):.1f}" if high else "-") + f" | {100 * len(high) / len(items):.1f}% |")
+    return lines
+
+
+SIZE_BINS = (("1", 1, 1), ("2", 2, 2), ("3", 3, 3), ("4", 4, 4), ("5+", 5, 7), ("4+", 4, 7))
+"""The columns of the table by tree size: questions in the gold tree (4+ = the issue's gate)."""
+
+
+def by_tree_size(runs: Sequence[dict], protocol: str = "new") -> list[str]:
+    """Exact accuracy (%) by the number of questions in the gold tree, per (domain, model), over
+    the folds of `protocol` that record each translation (their `confidence` rows)."""
+    from nl2policy.domains import get_domain
+    from nl2policy.language.corpus import load_corpus
+    from nl2policy.trees import to_tokens
+
+    groups: dict[tuple[str, str], list[tuple[str, bool]]] = {}
+    for r in runs:
+        if r["protocol"] == protocol and "confidence" in r:
+            groups.setdefault((r["domain"], r["model"]), []).extend((key, bool(ok)) for key, _, ok in r["confidence"])
+    if not groups:
+        return []
+    sizes = {}
+    for domain in {d for d, _ in groups}:
+        questions = get_domain(domain).vocab.questions
+        for spec in load_corpus(domain, rounds=(1, 2)):
+            sizes[(domain, spec.id)] = sum(1 for t in to_tokens(spec.tree) if t in questions)
+    lines = ["| domain | model | " + " | ".join(f"{name} questions" for name, _, _ in SIZE_BINS) + " |",
+             "|---|---" + "|---:" * len(SIZE_BINS) + "|"]
+    for (domain, model), items in sorted(groups.items()):
+        cells = []
+        for _, lo, hi in SIZE_BINS:
+            inside = [ok for key, ok in items if lo <= sizes[(domain, key)] <= hi]
+            cells.append(f"{100 * sum(inside) / len(inside):.1f} ({len(inside)})" if inside else "-")
+        lines.append(f"| {domain} | {model} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -189,11 +226,16 @@ def summarize(runs_files: Sequence[Path], md: Path, command: str, budget: str,
     effects = decoding_effects(runs)
     if effects:
         lines += ["## Decoding choices against the same networks decoded without them", "", *effects, ""]
+    sized = by_tree_size(runs)
+    if sized:
+        lines += ["## New writers, new trees: exact accuracy (%) by the number of questions in the tree", "",
+                  "(translations in brackets)", "", *sized, ""]
     reliable = reliability(runs)
     if reliable:
         lines += ["## Confidence: exact accuracy (%) and translations per bin of confidence", "",
                   "Confidence = the product of the tree's node probabilities (what `translate` reports for an on-topic "
-                  f"text); the app flags a translation below {LOW_CONFIDENCE}.", "", *reliable, ""]
+                  f"text); the app flags a translation below {LOW_CONFIDENCE}, and the translator asks the user about a situation "
+                  f"below {ASK_BELOW} (language/clarify.py).", "", *reliable, ""]
     have = {(r["domain"], r["model"], r["protocol"]): r["folds"] for r in table}
     missing = [f"{d} {m} {p}: {want - have.get((d, m, p), 0)} of {want} folds to go"
                for d, m, p, want in planned if have.get((d, m, p), 0) < want]
