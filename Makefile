@@ -36,8 +36,8 @@ corpus:                ## refresh the shipped corpus copy from ../shared/corpus
 	   src/nl2policy/data/corpus/round2/
 
 results-foundation: setup   ## results/foundation/tree_returns.md
-	$(BIN)/nl2policy corpus-returns --domain taxi --screen-episodes 100 --episodes 2000 --seed 0 --out results/foundation
-	$(BIN)/nl2policy corpus-returns --domain highway --screen-episodes 10 --episodes 100 --seed 0 --out results/foundation
+	$(BIN)/python -m experiments.policy corpus-returns --domain taxi --screen-episodes 100 --episodes 2000 --seed 0 --out results/foundation
+	$(BIN)/python -m experiments.policy corpus-returns --domain highway --screen-episodes 10 --episodes 100 --seed 0 --out results/foundation
 
 serve: setup          ## the web app on http://127.0.0.1:8000/
 	$(BIN)/nl2policy serve

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from nl2policy.domains import get_domain, make_env
-from nl2policy.policy.corpus_returns import distinct_trees
+from nl2policy.language.corpus import distinct_trees
 from nl2policy.policy.sb3_policy import METHODS, make_ppo
 
 

@@ -20,8 +20,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from nl2policy.grid import LOCAL, Job, run_jobs  # noqa: E402
-from nl2policy.policy.experiment import plan, run_one, select_trees  # noqa: E402
+from experiments.grid import LOCAL, Job, run_jobs  # noqa: E402
+from experiments.policy.table2 import plan, run_one, select_trees  # noqa: E402
 
 SIZES = (1, 2, 4)
 

@@ -44,7 +44,7 @@ from nl2policy.domains.highway import META_ACTION, HighwayFeatures
 from nl2policy.domains.highway_scenes import copy_scene_from, copy_scene_to
 from nl2policy.domains.highway_twin import HighwayTwin
 from nl2policy.domains.highway_vec import twin_episodes
-from nl2policy.grid import Job, normalize_ray_flag, ray_failure, ray_option_help, run_jobs
+from experiments.grid import Job, normalize_ray_flag, ray_failure, ray_option_help, run_jobs
 from nl2policy.trees import parse_tree, tree_to_json
 
 SCREEN_SEED = 900_000  # screening episodes: far from the evaluation seeds

@@ -75,7 +75,7 @@ class Judge:
 
 def starts(frequent: int, lowest: int) -> list[dict]:
     from nl2policy.domains import get_domain
-    from nl2policy.policy.experiment import distinct_policies
+    from experiments.policy.table2 import distinct_policies
     from nl2policy.policy.keep_best import tree_scorer
     from nl2policy.trees import parse_tree
 
@@ -94,7 +94,7 @@ def ceiling(out: Path, candidates: int, episodes: int) -> dict:
         return json.loads(path.read_text())
     from nl2policy.domains import get_domain
     from nl2policy.policy.convert import tree_batch_act_fn
-    from nl2policy.policy.experiment import distinct_policies
+    from experiments.policy.table2 import distinct_policies
     from nl2policy.policy.rollout import evaluate_batched
     from nl2policy.trees import parse_tree
 

@@ -21,7 +21,7 @@ from pathlib import Path
 import torch
 
 from nl2policy.domains import get_domain
-from nl2policy.policy.experiment import probe_rule, run_one
+from experiments.policy.table2 import probe_rule, run_one
 from nl2policy.policy.optimize import rolling_mean
 
 

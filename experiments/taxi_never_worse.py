@@ -32,7 +32,7 @@ import torch
 
 from nl2policy.domains import get_domain
 from nl2policy.policy.convert import tree_act_fn
-from nl2policy.policy.experiment import distinct_policies
+from experiments.policy.table2 import distinct_policies
 from nl2policy.policy.optimize import optimize_tree
 from nl2policy.policy.taxi_ceilings import best_tree
 from nl2policy.report import provenance

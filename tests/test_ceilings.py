@@ -11,7 +11,7 @@ from nl2policy.cli import app
 from nl2policy.domains import get_domain
 from nl2policy.domains.taxi import TaxiModel, expected_return, optimal_policy
 from nl2policy.domains.taxi_tables import effective_action, taxi_tables
-from nl2policy.policy.corpus_returns import distinct_trees
+from nl2policy.language.corpus import distinct_trees
 from nl2policy.policy.rollout import tree_policy
 from nl2policy.policy.taxi_ceilings import TreeMaps, best_stationary_policy, best_tree, options
 from nl2policy.trees import Leaf, Node

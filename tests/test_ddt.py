@@ -6,7 +6,7 @@ import torch
 
 from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.policy.convert import ddt_to_tree, pad_tree, tree_act_fn, tree_to_ddt
-from nl2policy.policy.corpus_returns import distinct_trees
+from nl2policy.language.corpus import distinct_trees
 from nl2policy.policy.ddt import DDT, complete_shape, random_ddt
 from nl2policy.policy.fidelity import agreement, uniform_states
 from nl2policy.trees import Leaf, Node

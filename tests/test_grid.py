@@ -13,7 +13,7 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from nl2policy.grid import LOCAL, Job, normalize_ray_flag, ray_failure, run_jobs
+from experiments.grid import LOCAL, Job, normalize_ray_flag, ray_failure, run_jobs
 
 ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()
@@ -24,7 +24,7 @@ def _square(x: int) -> int:
 
 
 def test_ray_flag_without_a_value_means_a_local_ray_and_jobs_run_the_same_everywhere():
-    assert normalize_ray_flag(["policy-experiment", "--ray"]) == ["policy-experiment", "--ray", LOCAL]
+    assert normalize_ray_flag(["table2", "--ray"]) == ["table2", "--ray", LOCAL]
     assert normalize_ray_flag(["--ray", "--steps", "5"]) == ["--ray", LOCAL, "--steps", "5"]
     assert normalize_ray_flag(["--ray", "10.0.0.5:6379"]) == ["--ray", "10.0.0.5:6379"]
     assert normalize_ray_flag(["--steps", "5"]) == ["--steps", "5"]
@@ -37,10 +37,10 @@ def test_ray_flag_without_a_value_means_a_local_ray_and_jobs_run_the_same_everyw
 
 
 def test_an_unreachable_cluster_address_is_one_clear_line_at_once(tmp_path):
-    from nl2policy.cli import app
+    from experiments.policy.__main__ import app
 
     started = time.time()
-    result = runner.invoke(app, ["policy-experiment", "--domain", "taxi", "--steps", "512", "--candidates", "2",
+    result = runner.invoke(app, ["table2", "--domain", "taxi", "--steps", "512", "--candidates", "2",
                                  "--best", "1", "--select-episodes", "1", "--tree-seeds", "1", "--baseline-seeds", "1",
                                  "--out", str(tmp_path), "--ray", "127.0.0.1:1"])
     assert result.exit_code == 2 and time.time() - started < 60
@@ -53,9 +53,9 @@ def _without_timing(result: dict) -> dict:
 
 
 def test_policy_experiment_on_ray_writes_what_the_local_runner_writes(tmp_path):
-    from nl2policy.cli import app
+    from experiments.policy.__main__ import app
 
-    args = ["policy-experiment", "--domain", "taxi", "--steps", "1024", "--candidates", "2", "--best", "1",
+    args = ["table2", "--domain", "taxi", "--steps", "1024", "--candidates", "2", "--best", "1",
             "--select-episodes", "1", "--tree-seeds", "1", "--baseline-seeds", "1"]
     local = runner.invoke(app, args + ["--out", str(tmp_path / "local")])
     assert local.exit_code == 0, local.output
@@ -88,7 +88,7 @@ def test_a_killed_ray_worker_restarts_its_run_from_the_checkpoint_and_the_grid_c
     """kill -9 the worker running a PPO run after its first checkpoint: Ray starts the task again,
     it resumes from checkpoint.zip, and the grid finishes; the same command again skips it all."""
     out = tmp_path / "grid"
-    cmd = [sys.executable, "-m", "nl2policy.cli", "policy-experiment", "--domain", "taxi", "--steps", "20480",
+    cmd = [sys.executable, "-m", "experiments.policy", "table2", "--domain", "taxi", "--steps", "20480",
            "--candidates", "2", "--best", "1", "--select-episodes", "1", "--tree-seeds", "1", "--baseline-seeds", "1",
            "--out", str(out), "--ray"]
     driver = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

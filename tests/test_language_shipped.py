@@ -86,3 +86,20 @@ def test_the_product_holds_only_the_shipped_architecture_and_never_imports_the_l
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "no network for encoder 'han' with decoder 'tree'" in out.stdout and "experiments/translation" in out.stdout
+
+
+def test_no_module_of_the_package_imports_ray_or_the_lab():
+    """The product is what a user runs: grids (Ray), harnesses and report writers live in
+    experiments/. Every import statement counts, also those inside functions (run lazily)."""
+    import ast
+    from pathlib import Path
+
+    import nl2policy
+
+    offenders = []
+    for path in sorted(Path(nl2policy.__file__).parent.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else [])
+            offenders += [f"{path.name}: {n}" for n in names if n.split(".")[0] in ("ray", "experiments")]
+    assert offenders == []

@@ -5,8 +5,8 @@ import json
 import numpy as np
 from typer.testing import CliRunner
 
-from nl2policy.cli import app
-from nl2policy.policy.experiment import _reach, steps_to
+from experiments.policy.__main__ import app
+from experiments.policy.table2 import _reach, steps_to
 from nl2policy.policy.optimize import rolling_mean
 
 runner = CliRunner()
@@ -24,7 +24,7 @@ def test_steps_to_a_level_and_the_median_over_runs_that_never_reach_it():
 
 
 def test_tiny_experiment_writes_table_and_skips_finished_runs(tmp_path):
-    args = ["policy-experiment", "--domain", "taxi", "--steps", "512", "--candidates", "3", "--best", "1",
+    args = ["table2", "--domain", "taxi", "--steps", "512", "--candidates", "3", "--best", "1",
             "--select-episodes", "5", "--tree-seeds", "1", "--baseline-seeds", "1", "--out", str(tmp_path)]
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
@@ -64,7 +64,7 @@ def test_sampled_probe_scores_the_start_tree_on_the_probe_scenes():
     from nl2policy.domains import get_domain
     from nl2policy.language.corpus import load_corpus
     from nl2policy.policy.convert import tree_batch_act_fn
-    from nl2policy.policy.experiment import PROBE_EPISODES, policy_probe
+    from experiments.policy.table2 import PROBE_EPISODES, policy_probe
     from nl2policy.policy.optimize import EVAL_SEED
     from nl2policy.policy.rollout import evaluate_batched
     from nl2policy.policy.sb3_policy import make_ppo
@@ -79,7 +79,7 @@ def test_sampled_probe_scores_the_start_tree_on_the_probe_scenes():
 
 
 def test_the_paper_sentence_calls_a_method_level_only_within_two_standard_errors():
-    from nl2policy.policy.experiment_report import paper_comparison
+    from experiments.policy.table2_report import paper_comparison
 
     def stats(median, stderr=0.1):
         return {"median": median, "stderr": stderr, "mean": median}
@@ -103,7 +103,7 @@ def test_highway_trees_are_judged_on_the_probe_scenes_not_the_ones_that_chose_th
     and polished trees on the probe's scenes, once (a finished run gains the scores when read)."""
     from nl2policy.language.corpus import load_corpus
     from nl2policy.policy.convert import tree_batch_act_fn
-    from nl2policy.policy.experiment import PROBE_EPISODES, judge_trees, summarize
+    from experiments.policy.table2 import PROBE_EPISODES, judge_trees, summarize
     from nl2policy.policy.keep_best import tree_scorer
     from nl2policy.policy.optimize import EVAL_SEED
     from nl2policy.policy.rollout import evaluate_batched

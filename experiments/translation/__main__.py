@@ -17,7 +17,7 @@ import typer
 from experiments.translation.evaluate import fold_count, run_experiment
 from experiments.translation.summary import summarize
 from nl2policy.console import console, domain_or_fail, err
-from nl2policy.grid import normalize_ray_flag, ray_failure, ray_option_help
+from experiments.grid import normalize_ray_flag, ray_failure, ray_option_help
 from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
 
 

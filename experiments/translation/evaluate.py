@@ -17,7 +17,7 @@ from typing import Callable, Optional, Sequence
 import torch
 
 from nl2policy.domains import get_domain
-from nl2policy.grid import Job, run_jobs
+from experiments.grid import Job, run_jobs
 from nl2policy.language.corpus import Spec, kfold, load_corpus, new_writer_folds, policy_key
 from nl2policy.language.dataset import member_pairs
 from nl2policy.language.models.config import MODELS, networks_config
@@ -207,7 +207,7 @@ def run_experiment(plan: Sequence[tuple[str, str, str, int]], out: Path,
     results are the same as with one, only the recorded seconds change. `keep_networks`: a folder
     to save each fold's networks in (DOMAIN-MODEL-FOLD.pt); `networks_from`: such a folder, whose
     networks a fold decodes instead of training where they fit it (kept_networks). `ray`: run
-    each fold as a Ray task of `workers` CPUs (nl2policy.grid); the lines are the same, in the
+    each fold as a Ray task of `workers` CPUs (experiments.grid); the lines are the same, in the
     order the folds finish."""
     torch.set_num_threads(1)
     out.mkdir(parents=True, exist_ok=True)

@@ -73,30 +73,6 @@ def run(
                   "(or `.venv/bin/nl2policy serve`), then open http://127.0.0.1:8000/")
 
 
-@app.command("corpus-returns")
-def corpus_returns_cmd(
-    domain: str = typer.Option(..., help=f"One of: {', '.join(DOMAINS)}"),
-    screen_episodes: int = typer.Option(10, min=1, max=MAX_EPISODES, help="Episodes per tree when ranking all corpus trees"),
-    episodes: int = typer.Option(100, min=2, max=MAX_EPISODES, help="Episodes for the final, fresh-seed measurements"),
-    seed: int = typer.Option(0),
-    out: Path = typer.Option(Path("results/foundation"), help="Folder for tree_returns_<domain>.md / .json"),
-) -> None:
-    """Mean return of random, best and median corpus tree, and taxi's optimum (results table)."""
-    from nl2policy.policy.corpus_returns import corpus_returns
-    from nl2policy.report import write_returns_table
-
-    domain_or_fail(domain)
-    seed_or_fail(seed)
-    out_dir_or_fail(out)
-    with progress_bar() as bar:
-        task = bar.add_task(f"{domain}: screening corpus trees", total=None)
-        rows = corpus_returns(domain, screen_episodes, episodes, seed,
-                              progress=lambda i, n: bar.update(task, completed=i, total=n))
-    command = (f"nl2policy corpus-returns --domain {domain} --screen-episodes {screen_episodes} "
-               f"--episodes {episodes} --seed {seed} --out {out}")
-    console.print(write_returns_table(domain, rows, out, command).read_text())
-
-
 def _register_area_commands() -> None:
     """Each area (policy, language, app) adds its own commands from its ``commands`` module."""
     import importlib
@@ -120,13 +96,12 @@ def main() -> None:  # pragma: no cover - console entry
     from nl2policy import console as terminal
 
     terminal.owns_process = True
-    from nl2policy.grid import normalize_ray_flag
 
     problem = argv_problem(sys.argv[1:])
     if problem:
         err.print(f"[bold red]error:[/] {problem}", highlight=False, soft_wrap=True)
         sys.exit(2)
-    app(args=normalize_ray_flag(sys.argv[1:]))
+    app(args=sys.argv[1:])
 
 
 if __name__ == "__main__":  # pragma: no cover

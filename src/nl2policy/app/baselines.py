@@ -35,5 +35,5 @@ def baseline_curves(results: Path, domain: str) -> dict:
         median = np.median([np.interp(grid, s, m) for s, m in found], axis=0)
         curves[name] = [[float(x), float(y)] for x, y in zip(grid, median)]
     note = (f"Baselines: median over seeds of the rolling mean return, from {runs}." if curves
-            else "No baseline runs found under results/policy/: run `nl2policy policy-experiment`.")
+            else "No baseline runs found under results/policy/: run `python -m experiments.policy table2`.")
     return {"curves": curves, "note": note}

@@ -14,7 +14,7 @@ from typing import Iterator, Optional, Sequence
 
 from nl2policy.data import corpus_dir
 from nl2policy.domains import get_domain
-from nl2policy.trees import Tree, TreeError, parse_tree
+from nl2policy.trees import Tree, TreeError, parse_tree, tree_to_json
 
 
 @dataclass(frozen=True)
@@ -131,3 +131,11 @@ def kfold(specs: Sequence[Spec], k: int = 5, seed: int = 0, by_writer: bool = Fa
         test = [i for i, f in enumerate(fold_of) if f == fold]
         train = [i for i, f in enumerate(fold_of) if f != fold]
         yield train, test
+
+
+def distinct_trees(domain: str) -> list[Tree]:
+    """Each distinct tree of `domain`'s round-1 corpus once, in the corpus's order (spellings, not policies)."""
+    seen: dict[str, Tree] = {}
+    for spec in load_corpus(domain):
+        seen.setdefault(json.dumps(tree_to_json(spec.tree), sort_keys=True), spec.tree)
+    return list(seen.values())

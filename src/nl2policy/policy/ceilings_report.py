@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Callable, Optional
 
 from nl2policy.domains import get_domain
-from nl2policy.policy.corpus_returns import distinct_trees
+from nl2policy.language.corpus import distinct_trees
 from nl2policy.policy.rollout import tree_policy
 from nl2policy.policy.taxi_ceilings import Ceiling, best_stationary_policy, best_tree
 from nl2policy.report import provenance

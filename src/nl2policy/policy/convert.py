@@ -7,7 +7,7 @@ exactly those ``w`` and ``c``; only the sharpness ``gamma`` is a choice. A leaf 
 
 Gamma and the leaf mass are the domain's knobs (``Domain.knobs``, from ``domains/<name>.toml``,
 where each value's reason is written; measured agreement for several gammas:
-``results/policy/fidelity.md``, made by ``nl2policy policy-fidelity``). Why a leaf mass works:
+``results/policy/fidelity.md``, made by ``python -m experiments.policy fidelity``). Why a leaf mass works:
 the tree's action must dominate (the fresh DDT should *drive* like the tree: its sampled actions
 are what PPO's first episodes score), yet leave PPO some entropy to explore with. With mass m
 and A actions the tree's action is the mixture's argmax whenever the right leaf's path

@@ -10,14 +10,16 @@ from __future__ import annotations
 
 import json
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Callable, Optional
 
 import numpy as np
 
 from nl2policy.domains import get_domain
-from nl2policy.language.corpus import load_corpus
+from nl2policy.language.corpus import distinct_trees
 from nl2policy.policy.rollout import Evaluation, evaluate, random_policy, tree_policy
+from nl2policy.report import provenance
 from nl2policy.trees import Tree, tree_to_json
 
 FRESH_SEED_OFFSET = 100_000  # final measurements use seeds disjoint from screening seeds
@@ -30,13 +32,6 @@ class Row:
     stderr: float
     episodes: int
     tree: Optional[dict] = None
-
-
-def distinct_trees(domain: str) -> list[Tree]:
-    seen: dict[str, Tree] = {}
-    for spec in load_corpus(domain):
-        seen.setdefault(json.dumps(tree_to_json(spec.tree), sort_keys=True), spec.tree)
-    return list(seen.values())
 
 
 def _evaluate_tree(args: tuple[str, Tree, int, int]) -> Evaluation:
@@ -73,3 +68,23 @@ def corpus_returns(domain: str, screen_episodes: int, episodes: int, seed: int, 
 
 def _row(name: str, ev, tree: Optional[dict] = None) -> Row:
     return Row(name, ev.mean_return, ev.stderr, ev.episodes, tree)
+
+
+def write_returns_table(domain: str, rows: list, out: Path, command: str) -> Path:
+    """results/<out>/tree_returns_<domain>.md and .json."""
+    out.mkdir(parents=True, exist_ok=True)
+    meta = provenance(command)
+    lines = [f"# Mean episode return of reference policies: {domain}", "", f"Made by: `{command}`  ", f"On: {meta['made']}", ""]
+    lines += ["| policy | mean return | stderr | episodes |", "|---|---:|---:|---:|"]
+    for r in rows:
+        eps = r.episodes if r.episodes else "exact"
+        se = f"{r.stderr:.3f}" if r.episodes else "-"
+        lines.append(f"| {r.policy} | {r.mean_return:.3f} | {se} | {eps} |")
+    for r in rows:
+        if r.tree:
+            lines.append(f"\n{r.policy}: `{json.dumps(r.tree)}`")
+    lines.append("")
+    md = out / f"tree_returns_{domain}.md"
+    md.write_text("\n".join(lines))
+    (out / f"tree_returns_{domain}.json").write_text(json.dumps({"meta": meta, "rows": [asdict(r) for r in rows]}, indent=2))
+    return md

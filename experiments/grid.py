@@ -22,7 +22,7 @@ from typing import Any, Callable, Optional, Sequence
 
 LOCAL = "local"
 RETRIES = 3  # a task whose worker process dies is started again this many times
-REPO_ROOT = Path(__file__).resolve().parents[2]
+REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""``nl2policy policy-fidelity``: the fidelity claim's numbers, written to results/policy/fidelity.md."""
+"""``python -m experiments.policy fidelity``: the fidelity claim's numbers, written to results/policy/fidelity.md."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from nl2policy.domains import DOMAINS, get_domain
-from nl2policy.policy.corpus_returns import distinct_trees
+from nl2policy.language.corpus import distinct_trees
 from nl2policy.policy.fidelity import agreement, env_states, round_trips, uniform_states
 from nl2policy.report import provenance
 

@@ -9,7 +9,7 @@ from typing import Optional
 
 import numpy as np
 
-from nl2policy.policy.experiment import JUDGED, LABEL, normalized
+from experiments.policy.table2 import JUDGED, LABEL, normalized
 from nl2policy.policy.sb3_policy import METHODS
 from nl2policy.report import provenance
 
