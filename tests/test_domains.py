@@ -147,3 +147,20 @@ def test_the_envs_never_produce_an_answer_set_the_spec_calls_impossible(domain):
         if terminated or truncated:
             obs, _ = env.reset(seed=int(rng.integers(1 << 30)))
     assert len(seen) >= 5  # the walk visited several kinds of state, not one
+
+
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_a_domain_names_itself_gives_an_example_and_finds_its_briefing(domain, tmp_path):
+    """What the app and `nl2policy run` show about a domain comes from the domain's own spec:
+    no page or command keeps a list of domains."""
+    from fastapi.testclient import TestClient
+
+    from nl2policy.app.server import create_app
+    from nl2policy.language.translate import translate
+
+    d = get_domain(domain)
+    assert d.title and d.example
+    assert translate(domain, d.example).tree is not None
+    with TestClient(create_app(tmp_path / "a.sqlite", tmp_path, results_dir=tmp_path), base_url="http://127.0.0.1") as client:
+        assert client.get("/api/domains").json()[domain]["title"] == d.title
+        assert len(client.get(f"/api/briefing/{domain}").json()["briefing"]) > 200

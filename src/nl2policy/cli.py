@@ -62,10 +62,10 @@ def run(
     out: Path = typer.Option(Path("runs/main"), help="Output folder for trees, curve and summary"),
 ) -> None:
     """The main job: translate a description, show the tree, optimize it with PPO, show it again."""
-    from nl2policy.pipeline import EXAMPLES, run_pipeline
+    from nl2policy.pipeline import run_pipeline
 
-    domain_or_fail(domain)
-    text = description_or_fail(EXAMPLES[domain] if text is None else text)
+    d = domain_or_fail(domain)
+    text = description_or_fail(d.example if text is None else text)
     seed_or_fail(seed)
     steps_or_fail(domain, steps)
     run_pipeline(console, err, domain, text, steps, seed, out_dir_or_fail(out / domain))

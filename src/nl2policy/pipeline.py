@@ -17,14 +17,6 @@ from rich.table import Table
 from nl2policy.domains import get_domain
 from nl2policy.trees import Tree, TreeError, parse_tree, to_text
 
-EXAMPLES = {
-    "taxi": ("If I have a passenger I drive straight to the airport. If I don't, I check the road to the city: "
-             "when the traffic is heavy I go to the village instead, and when it is clear I go to the city."),
-    "highway": ("If there is a car close in front of me, I move to the left lane when it is free and slow down "
-                "when it is not. If the road ahead is clear, I speed up."),
-}
-
-
 def show_tree(console: Console, title: str, tree_json: dict, domain: str) -> None:
     vocab = get_domain(domain).vocab
     try:

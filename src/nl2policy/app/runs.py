@@ -231,7 +231,8 @@ def read_curve(out_dir: Path, domain: str) -> list[dict]:
     (state.json, rewritten after every chunk of training), from which the same rolling mean
     is computed.
     """
-    from nl2policy.policy.optimize import STATE, WINDOW, rolling_mean
+    from nl2policy.domains import get_domain
+    from nl2policy.policy.optimize import STATE, rolling_mean
 
     out_dir = Path(out_dir)
     path = out_dir / "curve.csv"
@@ -249,5 +250,5 @@ def read_curve(out_dir: Path, domain: str) -> list[dict]:
         episodes = json.loads(state.read_text())["episodes"]
     except (json.JSONDecodeError, KeyError):
         return []  # caught mid-write; the next poll will read it
-    means = rolling_mean([r for _, r in episodes], WINDOW[domain])
+    means = rolling_mean([r for _, r in episodes], get_domain(domain).knobs.rolling_window)
     return [{"step": float(s), "rolling_mean": float(m)} for (s, _), m in zip(episodes, means)]

@@ -138,8 +138,8 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
     # --- domains ----------------------------------------------------------------------------
     @app.get("/api/domains")
     def domains() -> dict:
-        return {name: {"questions": dict(get_domain(name).vocab.questions), "actions": dict(get_domain(name).vocab.actions)}
-                for name in DOMAINS}
+        return {name: {"title": get_domain(name).title, "questions": dict(get_domain(name).vocab.questions),
+                       "actions": dict(get_domain(name).vocab.actions)} for name in DOMAINS}
 
     @app.get("/api/briefing/{domain}")
     def briefing(domain: str) -> dict:
@@ -147,8 +147,8 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
         from nl2policy.data import corpus_dir
 
         text = (corpus_dir() / "BRIEFING.md").read_text()
-        title = {"taxi": "## The taxi", "highway": "## The highway"}[domain]
-        section = text.split(title, 1)[1].split("\n## ", 1)[0]
+        head = f"## {get_domain(domain).briefing_section}"
+        section = text.split(head, 1)[1].split("\n## ", 1)[0] if head in text else ""
         tree_rules = text.split("## The tree", 1)[1] if "## The tree" in text else ""
         return {"domain": domain, "briefing": section.strip(), "tree_rules": tree_rules.strip()}
 

@@ -99,6 +99,9 @@ class Domain:
     exact_model: Optional[str] = None  # "module:factory" of an ExactModel, or None
     train_env_id: Optional[str] = None  # a registered vector env (vector entry point) that trains faster than env_id
     one_hot: tuple[str, ...] = ()  # features of which exactly one is 1 (taxi's place); see uniform_states
+    title: str = ""  # how people see the domain named (the app's domain menu)
+    example: str = ""  # the description `nl2policy run` translates when given none
+    briefing_section: Optional[str] = None  # the corpus briefing's "## <section>" about this domain
 
     @cached_property
     def phrases(self) -> dict[str, dict]:
@@ -213,7 +216,8 @@ def load_domain(name: str, corpus: Path | None = None) -> Domain:
         raise ValueError(f"{spec_path.name}: one_hot names unknown features {sorted(set(one_hot) - set(features))}")
     return Domain(name, vocab, tuple(features), weights, thresholds, impossible, spec["env_id"],
                   _knobs(spec, spec_path.name), exact_model=spec.get("exact_model"), one_hot=one_hot,
-                  train_env_id=spec.get("train_env_id"))
+                  train_env_id=spec.get("train_env_id"), title=spec.get("title", name.capitalize()),
+                  example=spec.get("example", ""), briefing_section=spec.get("briefing_section"))
 
 
 def _knobs(spec: dict, file: str) -> Knobs:

@@ -25,16 +25,13 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
-from nl2policy.domains import DOMAINS, get_domain
+from nl2policy.domains import get_domain
 from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn
 from nl2policy.policy.keep_best import keep_best, tree_scorer
 from nl2policy.policy.rollout import evaluate, tree_policy
 from nl2policy.policy.sb3_policy import TreePPO, action_probs_fn, actor_ddt, make_ppo, make_vec_env, soft_act_fn
 from nl2policy.trees import Tree, tree_to_json
 
-# Each domain's rolling window (Knobs.rolling_window), by name, for app/runs.py, which reads it
-# from here; everything in this package reads the knobs.
-WINDOW = {name: get_domain(name).knobs.rolling_window for name in DOMAINS}
 EVAL_SEED = 50_000  # evaluation episodes use seeds far from the training env's
 CHECKPOINT = "checkpoint.zip"
 STATE = "state.json"

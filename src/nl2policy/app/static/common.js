@@ -23,7 +23,18 @@ function confidenceBadge(c) {
   return `<span class="badge ${cls}" id="confidence">confidence ${(100 * c).toFixed(0)}%</span>`;
 }
 let DOMAINS = null;
-async function domains() { if (!DOMAINS) DOMAINS = await api("GET", "/api/domains"); return DOMAINS; }
+// The domains come from the server (each domain's folder names its title): every domain menu on
+// the page is filled from them, so a new domain needs no page edited.
+async function domains() {
+  if (!DOMAINS) {
+    DOMAINS = await api("GET", "/api/domains");
+    for (const sel of document.querySelectorAll("select#domain")) {
+      if (sel.options.length) continue;
+      for (const [id, d] of Object.entries(DOMAINS)) sel.appendChild(el("option", {value: id}, d.title || id));
+    }
+  }
+  return DOMAINS;
+}
 function isQuestion(domain, id) { return id && DOMAINS[domain].questions[id] !== undefined; }
 function label(domain, id) { return DOMAINS[domain].questions[id] || DOMAINS[domain].actions[id] || id; }
 
