@@ -150,6 +150,16 @@ def api_cases(server: Server) -> list[Case]:
         out.append(http_case(server, "description", name, "POST", "/api/translate",
                              body=json.dumps({"domain": "taxi", "description": text}).encode(), headers=JSON,
                              expect=status_in(200, 422) if "NUL" in name else status_in(422), expect_words="422 (NUL: 200 or 422)"))
+    vague = "go somewhere depending on things"
+    for name, answers in [("answers not a list", "wait"), ("answers an object", {"do": "wait"}), ("a null answer", [None]),
+                          ("an answer without a situation", [{"do": "wait"}]), ("an unknown action", [{"situation": {}, "do": "fly"}]),
+                          ("a situation the domain forbids", [{"situation": {"at_airport": True, "at_city": True}, "do": "wait"}]),
+                          ("1,000 answers", [{"situation": {}, "do": "wait"}] * 1000),
+                          ("a lone surrogate in an action", '[{"situation": {}, "do": "\\ud800"}]')]:
+        text = answers if isinstance(answers, str) and answers.startswith("[") else json.dumps(answers)
+        out.append(http_case(server, "answers", name, "POST", "/api/translate", headers=JSON, expect=status_in(422),
+                             expect_words="422 naming the answers",
+                             body=f'{{"domain": "taxi", "description": "{vague}", "answers": {text}}}'.encode()))
     for name, writer in [("whitespace writer", "   "), ("zero-width writer", "\u200b"), ("61-character writer", "w" * 61)]:
         out.append(http_case(server, "submission", name, "POST", "/api/submissions", expect=status_in(422), expect_words="422",
                              body=json.dumps({"domain": "taxi", "writer": writer, "grid": ["wait"] + [None] * 14,
@@ -297,6 +307,9 @@ def cli_cases(base: Path) -> list[Case]:
         ("invalid UTF-8 in argv", [b"translate", b"--domain", b"taxi", b"go to the \xff city"], {}),
         ("zero-width description", [b"translate", b"--domain", b"taxi", "\u200b\u200b".encode()], {}),
         ("empty description", [b"translate", b"--domain", b"taxi", b""], {}),
+        ("--answer not JSON", [b"translate", b"--domain", b"taxi", b"--answer", b"{situation", b"go somewhere"], {}),
+        ("--answer with an unknown action", [b"translate", b"--domain", b"taxi", b"--answer",
+                                             b'{"situation": {}, "do": "fly"}', b"go somewhere"], {}),
         ("train-translator into an unwritable folder", [b"train-translator", b"--domain", b"taxi", b"--out", b"/proc/nl2policy"], {}),
         ("NL2POLICY_CORPUS missing", [b"translate", b"--domain", b"taxi", b"go to the city"], {"NL2POLICY_CORPUS": str(base / "none")}),
         ("NL2POLICY_HOME unwritable", [b"serve", b"--port", str(free_port()).encode()], {"NL2POLICY_HOME": "/proc/nl2policy"}),
