@@ -6,7 +6,7 @@ BIN    := $(VENV)/bin
 WHEELS := $(if $(wildcard /opt/wheels),--find-links /opt/wheels,)
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup browser demo test corpus results-foundation bench screenshots serve clean
+.PHONY: setup browser demo test test-fast corpus results-foundation bench screenshots serve clean
 
 setup: $(STAMP) browser
 
@@ -25,8 +25,11 @@ $(STAMP): pyproject.toml requirements.lock
 demo: setup            ## the main job on embedded defaults
 	$(BIN)/nl2policy run --domain taxi
 
-test: setup            ## the test suite (CI runs this)
+test: setup            ## the whole test suite (CI runs this): under 10 minutes on 2 cores
 	$(BIN)/python -m pytest
+
+test-fast: $(STAMP)    ## the tests that are neither slow, nor in a browser, nor training: under 2 minutes
+	$(BIN)/python -m pytest -m "not slow and not browser and not train"
 
 corpus:                ## refresh the shipped corpus copy from ../shared/corpus
 	cp ../shared/corpus/README.md ../shared/corpus/BRIEFING.md ../shared/corpus/vocabulary.json \

@@ -151,6 +151,7 @@ def live(tmp_path):
     thread.join(timeout=15)
 
 
+@pytest.mark.slow
 def test_a_half_sent_body_gets_408_and_the_connection_ends(live):
     port, _ = live
     with socket.create_connection(("127.0.0.1", port), timeout=15) as s:
@@ -168,6 +169,7 @@ def test_a_half_sent_body_gets_408_and_the_connection_ends(live):
     assert took < 10
 
 
+@pytest.mark.slow
 def test_a_queued_run_starts_after_a_35_second_lock_and_after_a_damaged_file(live):
     """The run manager used to die on the first store error, leaving every later run queued."""
     port, base = live

@@ -28,6 +28,7 @@ def idle_client(tmp_path):
         yield c
 
 
+@pytest.mark.slow
 def test_concurrent_first_translations_all_succeed(tmp_path):
     """On a fresh server, simultaneous first translate requests used to fail with 500 (a
     concurrent first import of transformers). A fresh interpreter, so nothing is loaded yet."""

@@ -10,12 +10,15 @@ import sys
 import time
 import urllib.request
 
+import pytest
 from fastapi.testclient import TestClient
 
 from nl2policy.app.runlock import acquire, holder
 from nl2policy.app.server import create_app
 from nl2policy.app.store import Store
 from nl2policy.app.trainer import LOCKED_EXIT
+
+pytestmark = pytest.mark.slow
 
 TREE = {"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_city"}}
 

@@ -2,9 +2,12 @@
 
 import time
 
+import pytest
 from fastapi.testclient import TestClient
 
 from nl2policy.app.server import create_app
+
+pytestmark = pytest.mark.train
 
 TREE = {"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_city"}}
 

@@ -17,6 +17,8 @@ from nl2policy.policy.taxi_ceilings import TreeMaps, best_stationary_policy, bes
 from nl2policy.trees import Leaf, Node
 from nl2policy.trees.tree import depth
 
+pytestmark = pytest.mark.slow
+
 TAXI = get_domain("taxi")
 
 

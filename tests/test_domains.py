@@ -109,6 +109,7 @@ def test_optimum_is_a_real_policy_of_the_env():
     assert abs(np.mean(returns) - optimum) < 4 * stderr
 
 
+@pytest.mark.slow
 def test_every_corpus_tree_runs_in_its_env():
     taxi_env = make_env("taxi")
     for spec in load_corpus("taxi"):
@@ -131,6 +132,7 @@ def test_evaluation_is_reproducible():
     assert a.returns == b.returns
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("domain", DOMAINS)
 def test_the_envs_never_produce_an_answer_set_the_spec_calls_impossible(domain):
     # discretization prunes branches that only impossible answer sets reach (Domain.forced_answer),

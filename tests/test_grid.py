@@ -11,9 +11,12 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 from experiments.grid import LOCAL, Job, normalize_ray_flag, ray_failure, run_jobs
+
+pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()

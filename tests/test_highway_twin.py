@@ -87,6 +87,7 @@ def test_twin_scenes_come_from_highway_envs_distribution():
         assert abs(a.mean() - b.mean()) <= 4 * se + 1e-9, key
 
 
+@pytest.mark.slow
 def test_twin_returns_agree_with_highway_env_on_a_small_sample():
     """The random policy's mean return: 15 highway-env episodes against 1,000 twin episodes,
     within 3 standard errors of the difference (a coarse guard; the fidelity table is the
@@ -175,6 +176,7 @@ def test_highway_trains_on_the_twin_unless_told_otherwise():
         make_vec_env("highway", seed=0, simulator="warp")
 
 
+@pytest.mark.train
 def test_optimize_highway_on_the_twin_reports_highway_env_returns(tmp_path):
     from nl2policy.policy.optimize import optimize_tree
 
@@ -194,6 +196,7 @@ def test_optimize_highway_on_the_twin_reports_highway_env_returns(tmp_path):
     assert state["simulator"] == "fast"
 
 
+@pytest.mark.train
 def test_a_run_resumes_only_on_the_simulator_it_trained_on(tmp_path):
     from nl2policy.policy.optimize import OptimizeRefused, optimize_tree
 

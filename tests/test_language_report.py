@@ -169,6 +169,7 @@ def test_fold_result_counts_confident_and_unsure_translations(monkeypatch, one_t
         assert " ".join(to_tokens(ids[sid].tree)) != tokens
 
 
+@pytest.mark.train
 def test_fold_result_with_a_beam_and_findings_also_records_decoding_without_them(monkeypatch, one_torch_thread):
     import dataclasses
 

@@ -15,6 +15,8 @@ from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
 from nl2policy.language.train import fit
 from nl2policy.trees import to_tokens
 
+pytestmark = pytest.mark.train
+
 
 @pytest.mark.parametrize("name", [DEFAULT_MODEL, "smoke"])
 def test_fold_training_data_reads_only_training_indices(monkeypatch, name):

@@ -11,6 +11,8 @@ from nl2policy.policy.optimize import optimize_tree
 from nl2policy.policy.sb3_policy import actor_ddt, make_ppo
 from nl2policy.trees import Leaf, Node, parse_tree, tree_to_json
 
+pytestmark = pytest.mark.train
+
 TREE = Node("has_passenger", Leaf("go_airport"), Node("heavy_traffic", Leaf("go_village"), Leaf("go_city")))
 FILES = ("initial_tree.json", "last_tree.json", "best_tree.json", "final_tree.json", "curve.csv", "curve.png", "summary.json")
 runner = CliRunner()

@@ -2,12 +2,15 @@
 
 import json
 
+import pytest
 import numpy as np
 from typer.testing import CliRunner
 
 from experiments.policy.__main__ import app
 from experiments.policy.table2 import _reach, steps_to
 from nl2policy.policy.optimize import rolling_mean
+
+pytestmark = pytest.mark.train
 
 runner = CliRunner()
 
