@@ -17,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 from nl2policy.domains import make_env
-from nl2policy.domains.highway import BASE_CONFIG, META_ACTION
+from nl2policy.domains.highway.env import BASE_CONFIG, META_ACTION
 
 
 def steps_per_second(env: gym.Env, steps: int, seed: int, map_action=lambda a: a) -> float:
@@ -39,9 +39,9 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=15, help="paired highway rounds for the ratio")
     args = parser.parse_args()
     envs = {
-        "taxi (nl2policy/Taxi-v0)": (make_env("taxi"), lambda a: a),
+        "taxi (nl2policy/taxi-v0)": (make_env("taxi"), lambda a: a),
         "highway raw (highway-fast-v0, same config)": (gym.make("highway-fast-v0", config=BASE_CONFIG).unwrapped, lambda a: META_ACTION[a]),
-        "highway features (nl2policy/Highway-v0)": (make_env("highway").unwrapped, lambda a: a),
+        "highway features (nl2policy/highway-v0)": (make_env("highway").unwrapped, lambda a: a),
     }
     best = {}
     for r in range(args.repeats):  # interleave, so drift on the machine hits every env alike
@@ -50,7 +50,7 @@ def main() -> None:
             best[name] = max(best.get(name, 0.0), steps_per_second(env, steps, seed=r, map_action=mapping))
     for name, sps in best.items():
         print(f"{name:45s} {sps:10.1f} steps/s")
-    (raw_env, raw_map), (our_env, our_map) = envs["highway raw (highway-fast-v0, same config)"], envs["highway features (nl2policy/Highway-v0)"]
+    (raw_env, raw_map), (our_env, our_map) = envs["highway raw (highway-fast-v0, same config)"], envs["highway features (nl2policy/highway-v0)"]
     ratios = []
     for r in range(args.rounds):
         raw = steps_per_second(raw_env, 60, seed=100 + r, map_action=raw_map)

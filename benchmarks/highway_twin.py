@@ -21,8 +21,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from nl2policy.domains.highway import HighwayFeatures  # noqa: E402
-from nl2policy.domains.highway_vec import HighwayTwinVectorEnv  # noqa: E402
+from nl2policy.domains.highway.env import HighwayFeatures  # noqa: E402
+from nl2policy.domains.highway.vec import HighwayTwinVectorEnv  # noqa: E402
 
 SIZES = (1, 64, 1024)
 

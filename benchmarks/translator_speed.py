@@ -56,7 +56,7 @@ def main() -> None:
     from nl2policy.language.text import split_sentences
     from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
     from nl2policy.language.shipping import train_default
-    from nl2policy.language.translate import SHIPPED_DIR, get_model, model_path, translate
+    from nl2policy.language.translate import get_model, shipped_path, translate
 
     name = args.model or DEFAULT_MODEL
     # one-time loads (WordNet, phrase tables, MiniLM weights, the optimizer's lazy imports)
@@ -74,7 +74,7 @@ def main() -> None:
         start = time.perf_counter()
         trained = train_default(args.domain, name)  # members side by side, one process per core
         train_s = time.perf_counter() - start
-        shipped = model_path(args.domain, name, SHIPPED_DIR)
+        shipped = shipped_path(args.domain, name)
         same_as_shipped = "no shipped file"
         if shipped.is_file():  # the shipped file was trained one member at a time, one thread
             a, b = (torch.load(p, weights_only=False)["nets"] for p in (trained, shipped))

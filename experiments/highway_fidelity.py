@@ -40,10 +40,10 @@ from scipy.stats import spearmanr
 
 from nl2policy.data import corpus_dir
 from nl2policy.domains import get_domain
-from nl2policy.domains.highway import META_ACTION, HighwayFeatures
-from nl2policy.domains.highway_scenes import copy_scene_from, copy_scene_to
-from nl2policy.domains.highway_twin import HighwayTwin
-from nl2policy.domains.highway_vec import twin_episodes
+from nl2policy.domains.highway.env import META_ACTION, HighwayFeatures
+from nl2policy.domains.highway.scenes import copy_scene_from, copy_scene_to
+from nl2policy.domains.highway.twin import HighwayTwin
+from nl2policy.domains.highway.vec import twin_episodes
 from experiments.grid import Job, normalize_ray_flag, ray_failure, ray_option_help, run_jobs
 from nl2policy.trees import parse_tree, tree_to_json
 

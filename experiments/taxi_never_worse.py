@@ -3,7 +3,7 @@
 Starts: the 15 most frequent distinct corpus policies and the 5 lowest-return other ones
 (exact expected return), each optimized with seeds 0..seeds-1 at `optimize`'s default budget,
 exactly as the command runs it (``optimize_tree``: PPO, verified keep-best, polish). Judged on
-the exact model against the best dictionary tree of depth <= 3 (``taxi_ceilings.best_tree``):
+the exact model against the best dictionary tree of depth <= 3 (``domains/taxi/ceilings.best_tree``):
 
 * never worse: the returned tree's exact return >= the start's;
 * within 1 %: the returned tree's return >= 99 % of the best tree's;
@@ -34,7 +34,7 @@ from nl2policy.domains import get_domain
 from nl2policy.policy.convert import tree_act_fn
 from experiments.policy.table2 import distinct_policies
 from nl2policy.policy.optimize import optimize_tree
-from nl2policy.policy.taxi_ceilings import best_tree
+from nl2policy.domains.taxi.ceilings import best_tree
 from nl2policy.report import provenance
 from nl2policy.trees import parse_tree
 

@@ -19,7 +19,7 @@ import torch
 
 from nl2policy.domains import get_domain
 from nl2policy.domains.spec import Knobs
-from nl2policy.domains.taxi import TaxiModel, expected_return, optimal_policy
+from nl2policy.domains.taxi.env import TaxiModel, expected_return, optimal_policy
 from nl2policy.policy.convert import ddt_to_tree, tree_act_fn
 from nl2policy.policy.sb3_policy import make_ppo
 from nl2policy.report import provenance
@@ -35,7 +35,7 @@ TREES = {  # exact returns 7.94 / 6.206 / 4.867; the 1st, 2nd and 14th most freq
              "no": {"if": "has_passenger", "yes": {"do": "go_airport"}, "no": {"do": "go_village"}}},
 }
 # The settings before this sweep (PPO's 3e-4 for the tree, leaf mass 0.95, no entropy bonus)
-# and the ones now in taxi.toml's knobs.
+# and the ones now in taxi/spec.toml's knobs.
 VARIANTS = {
     "old: lr x1, mass 0.95, ent 0": dict(scale=1.0, mass=0.95, ent_coef=0.0),
     "new: lr x33, mass 0.7, ent 0.01": dict(scale=33.0, mass=0.7, ent_coef=0.01),
@@ -83,7 +83,7 @@ def main() -> None:
     lines = ["# Does PPO change the tree? (taxi, exact returns of the discretized tree)", "",
              f"Made by: `{command}`  ", f"On: {meta['made']}  ",
              f"Discretized after every {CHUNK} steps; exact expected return (`domains.taxi.expected_return`). "
-             f"Optimum {optimum:.3f}. Other PPO settings: taxi.toml's `[knobs.ppo]`.", "",
+             f"Optimum {optimum:.3f}. Other PPO settings: taxi/spec.toml's `[knobs.ppo]`.", "",
              "| variant | tree | seed | initial tree | final tree | best checkpoint tree | trajectory |",
              "|---|---|---:|---:|---:|---:|---|"]
     for r in rows:

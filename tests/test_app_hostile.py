@@ -237,8 +237,11 @@ def test_cli_train_translator_into_an_unwritable_folder(tmp_path):
 
 
 def test_cli_corpus_folder_missing(tmp_path):
-    _one_line(_cli(b"translate", b"--domain", b"taxi", b"go to the city", env={"NL2POLICY_CORPUS": str(tmp_path / "none")}),
-              "NL2POLICY_CORPUS")
+    """Training reads the corpus and says which folder lacks it; translating needs only the
+    domain's folder, so it still works."""
+    env = {"NL2POLICY_CORPUS": str(tmp_path / "none")}
+    _one_line(_cli(b"train-translator", b"--domain", b"taxi", b"--out", str(tmp_path / "m").encode(), env=env), "NL2POLICY_CORPUS")
+    assert _cli(b"translate", b"--domain", b"taxi", b"go to the city", env=env).returncode == 0
 
 
 @pytest.mark.parametrize("args", [[b"optimize", b"--domain", b"taxi", b"--tree", b'{"do": "wait"}', b"--steps", b"100000000000000000000"],

@@ -9,11 +9,11 @@ from typer.testing import CliRunner
 
 from nl2policy.cli import app
 from nl2policy.domains import get_domain
-from nl2policy.domains.taxi import TaxiModel, expected_return, optimal_policy
-from nl2policy.domains.taxi_tables import effective_action, taxi_tables
+from nl2policy.domains.taxi.env import TaxiModel, expected_return, optimal_policy
+from nl2policy.domains.taxi.tables import effective_action, taxi_tables
 from nl2policy.language.corpus import distinct_trees
 from nl2policy.policy.rollout import tree_policy
-from nl2policy.policy.taxi_ceilings import TreeMaps, best_stationary_policy, best_tree, options
+from nl2policy.domains.taxi.ceilings import TreeMaps, best_stationary_policy, best_tree, options
 from nl2policy.trees import Leaf, Node
 from nl2policy.trees.tree import depth
 
@@ -99,10 +99,10 @@ def test_full_ceilings_are_ordered(tables):
     assert stationary.value <= optimal_policy(TaxiModel())[0] + 1e-12
 
 
-def test_ceilings_cli_refuses_a_domain_without_an_exact_model(tmp_path):
+def test_ceilings_cli_refuses_a_domain_without_a_ceiling_search(tmp_path):
     result = CliRunner().invoke(app, ["ceilings", "--domain", "highway", "--out", str(tmp_path)])
     assert result.exit_code == 2
-    assert result.output.strip().splitlines() == ["error: ceilings need an exact model to search; highway has none"]
+    assert result.output.strip().splitlines() == ["error: highway has no ceiling search (its spec.toml names no `ceilings` module)"]
     assert not list(tmp_path.iterdir())
 
 

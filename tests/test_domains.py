@@ -6,8 +6,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from nl2policy.domains import DOMAINS, get_domain, make_env
-from nl2policy.domains.highway import LANE_WIDTH, HighwayFeatures, kinematics_to_features
-from nl2policy.domains.taxi import TaxiEnv, TaxiModel, TaxiState, expected_return, optimal_policy
+from nl2policy.domains.highway.env import LANE_WIDTH, HighwayFeatures, kinematics_to_features
+from nl2policy.domains.taxi.env import TaxiEnv, TaxiModel, TaxiState, expected_return, optimal_policy
 from nl2policy.language.corpus import load_corpus
 from nl2policy.policy.rollout import evaluate, random_policy, tree_policy
 
@@ -15,6 +15,22 @@ from nl2policy.policy.rollout import evaluate, random_policy, tree_policy
 def test_unknown_domain_is_a_clear_error():
     with pytest.raises(KeyError, match="unknown domain 'boat'"):
         get_domain("boat")
+
+
+def test_a_described_domains_dictionary_is_the_corpus_vocabulary_word_for_word():
+    """Taxi and highway carry their dictionary in their folder; writers were shown the corpus's
+    vocabulary.json, and the two must not drift apart."""
+    import json
+
+    from nl2policy.data import corpus_dir
+    from nl2policy.language.corpus import covered_domains
+
+    vocabulary = json.loads((corpus_dir() / "vocabulary.json").read_text())
+    assert covered_domains() == {"taxi", "highway"} and set(DOMAINS) >= covered_domains()
+    for name in covered_domains():
+        d = get_domain(name)
+        assert list(d.vocab.questions.items()) == list(vocabulary[name]["questions"].items())
+        assert list(d.vocab.actions.items()) == list(vocabulary[name]["actions"].items())
 
 
 @pytest.mark.parametrize("domain", DOMAINS)
@@ -28,12 +44,12 @@ def test_spec_matches_vocabulary(domain):
 
 
 def test_taxi_env_passes_checker():
-    check_env(gym.make("nl2policy/Taxi-v0").unwrapped)
+    check_env(gym.make("nl2policy/taxi-v0").unwrapped)
 
 
 def test_highway_env_passes_checker():
-    check_env(gym.make("nl2policy/Highway-v0").unwrapped)
-    assert isinstance(gym.make("nl2policy/Highway-v0").unwrapped, HighwayFeatures)
+    check_env(gym.make("nl2policy/highway-v0").unwrapped)
+    assert isinstance(gym.make("nl2policy/highway-v0").unwrapped, HighwayFeatures)
 
 
 def test_taxi_questions_test_the_right_features(taxi):
@@ -165,4 +181,7 @@ def test_a_domain_names_itself_gives_an_example_and_finds_its_briefing(domain, t
     assert translate(domain, d.example).tree is not None
     with TestClient(create_app(tmp_path / "a.sqlite", tmp_path, results_dir=tmp_path), base_url="http://127.0.0.1") as client:
         assert client.get("/api/domains").json()[domain]["title"] == d.title
-        assert len(client.get(f"/api/briefing/{domain}").json()["briefing"]) > 200
+        briefing = client.get(f"/api/briefing/{domain}").json()["briefing"]
+        assert len(briefing) > 200
+        # the corpus briefing's own section, or (a domain nobody has described) its dictionary
+        assert (d.briefing_section is not None) or all(q in briefing for q in d.vocab.questions.values())

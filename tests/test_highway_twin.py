@@ -13,11 +13,11 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecMonitor
 
 from nl2policy.domains import get_domain
-from nl2policy.domains.highway import META_ACTION, HighwayFeatures
-from nl2policy.domains.highway_geometry import RoadOrder
-from nl2policy.domains.highway_scenes import copy_scene_to
-from nl2policy.domains.highway_twin import HighwayTwin
-from nl2policy.domains.highway_vec import HighwayTwinVectorEnv, twin_episodes
+from nl2policy.domains.highway.env import META_ACTION, HighwayFeatures
+from nl2policy.domains.highway.geometry import RoadOrder
+from nl2policy.domains.highway.scenes import copy_scene_to
+from nl2policy.domains.highway.twin import HighwayTwin
+from nl2policy.domains.highway.vec import HighwayTwinVectorEnv, twin_episodes
 from nl2policy.policy.vec_env import SB3VecEnv
 from nl2policy.trees import parse_tree
 
@@ -124,7 +124,7 @@ def test_neighbour_search_matches_all_pairs():
 
 
 def test_twin_passes_gymnasiums_env_checker_and_is_seeded():
-    env = gym.make("nl2policy/HighwayTwin-v0")
+    env = gym.make("nl2policy/highway-train-v0")
     check_env(env.unwrapped, skip_render_check=True)
     first = [env.reset(seed=4)[0]] + [env.step(1)[0] for _ in range(5)]
     again = [env.reset(seed=4)[0]] + [env.step(1)[0] for _ in range(5)]
@@ -132,7 +132,7 @@ def test_twin_passes_gymnasiums_env_checker_and_is_seeded():
 
 
 def test_vector_env_resets_finished_episodes_in_the_same_step():
-    vec = gym.make_vec("nl2policy/HighwayTwin-v0", num_envs=16, vectorization_mode="vector_entry_point")
+    vec = gym.make_vec("nl2policy/highway-train-v0", num_envs=16, vectorization_mode="vector_entry_point")
     assert isinstance(vec, HighwayTwinVectorEnv)
     obs, _ = vec.reset(seed=1)
     again, _ = vec.reset(seed=1)
@@ -182,10 +182,10 @@ def test_optimize_highway_on_the_twin_reports_highway_env_returns(tmp_path):
 
     tree = parse_tree(WEAVER, get_domain("highway").vocab)
     summary = optimize_tree("highway", tree, steps=64, seed=0, out=tmp_path, eval_episodes=2, polish=False)
-    assert summary["trained_on"] == "nl2policy/HighwayTwin-v0"
-    assert summary["evaluated_on"] == "nl2policy/Highway-v0"
+    assert summary["trained_on"] == "nl2policy/highway-train-v0"
+    assert summary["evaluated_on"] == "nl2policy/highway-v0"
     assert summary["steps"] == 16 * 256  # one rollout of 16 twin episodes
-    assert "HighwayTwin" in summary["keep_best"]["scored_by"]
+    assert "highway-train-v0" in summary["keep_best"]["scored_by"]
     # The returned tree, read back from its file and scored afresh, is no worse than the start.
     from nl2policy.policy.keep_best import tree_from_json, tree_scorer
 
@@ -233,7 +233,7 @@ def test_with_highway_env_seeding_a_twin_episode_is_highway_envs_episode_for_tha
             obs, reward, terminated, truncated, _ = env.step(int(_weaver_actions(obs[None, :])[0]))
             total, done = total + reward, terminated or truncated
         assert ours["return"][i] == pytest.approx(total, abs=1e-9)
-    single = gym.make("nl2policy/HighwayTwin-v0")
+    single = gym.make("nl2policy/highway-train-v0")
     np.testing.assert_array_equal(single.reset(seed=seed)[0], env.reset(seed=seed)[0])
 
 
@@ -251,6 +251,6 @@ def test_many_policies_in_one_batch_meet_the_scenes_each_would_meet_alone():
     assert [e.returns for e in together] == [e.returns for e in alone]
     assert len({tuple(e.returns) for e in together}) == 3  # the policies do drive differently
     with pytest.raises(ValueError, match="repeat"):
-        from nl2policy.domains.highway_twin import HighwayTwin
+        from nl2policy.domains.highway.twin import HighwayTwin
 
         HighwayTwin(5).reset(np.ones(5, dtype=bool), repeat=2)

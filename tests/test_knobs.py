@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from nl2policy.domains import get_domain
-from nl2policy.domains.spec import SPEC_DIR, Knobs, PPOSettings, load_domain
+from nl2policy.domains.spec import Knobs, PPOSettings, load_domain
 from nl2policy.policy.convert import tree_to_ddt
 from nl2policy.policy.sb3_policy import make_ppo
 from nl2policy.trees import Leaf, Node
@@ -25,14 +25,13 @@ def test_knobs_are_typed_fields_of_the_spec(name):
     assert isinstance(knobs.ppo.n_steps, int) and isinstance(knobs.fidelity_gammas, tuple)
 
 
-def test_a_typo_in_the_knobs_is_an_error_not_a_default(tmp_path, monkeypatch):
-    for name in ("taxi.toml", "highway.toml"):
-        shutil.copy(SPEC_DIR / name, tmp_path / name)
-    text = (tmp_path / "taxi.toml").read_text().replace("leaf_mass = 0.7", "leaf_mas = 0.7")
-    (tmp_path / "taxi.toml").write_text(text)
-    monkeypatch.setattr("nl2policy.domains.spec.SPEC_DIR", tmp_path)
-    with pytest.raises(ValueError, match=r"taxi.toml.*unknown keys \['leaf_mas'\], missing keys \['leaf_mass'\]"):
-        load_domain("taxi")
+def test_a_typo_in_the_knobs_is_an_error_not_a_default(tmp_path):
+    folder = tmp_path / "taxi"
+    shutil.copytree(get_domain("taxi").folder, folder)
+    text = (folder / "spec.toml").read_text().replace("leaf_mass = 0.7", "leaf_mas = 0.7")
+    (folder / "spec.toml").write_text(text)
+    with pytest.raises(ValueError, match=r"taxi/spec.toml.*unknown keys \['leaf_mas'\], missing keys \['leaf_mass'\]"):
+        load_domain(folder, "nl2policy.domains.taxi")
 
 
 def test_exact_model_is_a_capability_of_the_domain():

@@ -33,7 +33,7 @@ def _paths(tree, path=()):
 @pytest.mark.parametrize("domain", ["taxi", "highway"])
 def test_every_phrase_set_is_complete(domain):
     vocab = get_domain(domain).vocab
-    phrases = get_domain(domain).phrases  # the domain's own (domains/phrases/DOMAIN.toml)
+    phrases = get_domain(domain).phrases  # the domain's own (domains/DOMAIN/phrases.toml)
     assert set(phrases["questions"]) == set(vocab.question_ids)
     assert set(phrases["actions"]) == set(vocab.action_ids) == set(phrases["reasons"])
     for q in phrases["questions"].values():

@@ -179,8 +179,9 @@ def test_polish_escapes_the_single_edit_optimum_by_larger_moves_that_keep_the_ro
     """The best corpus tree is a single-edit optimum (7.94); re-solving a subtree, then both
     branches under its root question, reaches the best tree with that root (the exact search's)."""
     from nl2policy.domains import get_domain
-    from nl2policy.policy.polish import SubtreeSearch, neighbours, polish
-    from nl2policy.policy.taxi_ceilings import best_tree
+    from nl2policy.domains.taxi.subtree import SubtreeSearch
+    from nl2policy.policy.polish import neighbours, polish
+    from nl2policy.domains.taxi.ceilings import best_tree
     from nl2policy.policy.convert import tree_act_fn
 
     d = get_domain("taxi")

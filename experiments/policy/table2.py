@@ -111,7 +111,7 @@ def table_yardsticks(domain: str, root: Path) -> dict:
     n = len(d.actions)
     uniform = lambda X: np.full((len(np.atleast_2d(X)), n), 1.0 / n)  # noqa: E731
     if d.exact is not None:
-        from nl2policy.policy.taxi_ceilings import best_stationary_policy
+        from nl2policy.domains.taxi.ceilings import best_stationary_policy
 
         ceiling = {"value": best_stationary_policy(d.exact.tables()).value,
                    "what": "best stationary policy on the features (exact)"}

@@ -147,8 +147,13 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
         from nl2policy.data import corpus_dir
 
         text = (corpus_dir() / "BRIEFING.md").read_text()
-        head = f"## {get_domain(domain).briefing_section}"
-        section = text.split(head, 1)[1].split("\n## ", 1)[0] if head in text else ""
+        d = get_domain(domain)
+        head = f"## {d.briefing_section}"
+        section = text.split(head, 1)[1].split("\n## ", 1)[0] if d.briefing_section and head in text else ""
+        if not section.strip():  # a domain the corpus briefing does not cover: its own dictionary
+            section = "\n".join([f"The {d.title.lower()} can ask these questions:", "",
+                                  *(f"- {q}" for q in d.vocab.questions.values()), "", "and do one of these:", "",
+                                  *(f"- {a}" for a in d.vocab.actions.values())])
         tree_rules = text.split("## The tree", 1)[1] if "## The tree" in text else ""
         return {"domain": domain, "briefing": section.strip(), "tree_rules": tree_rules.strip()}
 

@@ -1,35 +1,95 @@
-"""The two domains, each a declarative spec (``<name>.toml`` + the corpus vocabulary) and a
-registered Gymnasium env whose observation is the spec's feature vector."""
+"""The domains: one folder each, found, not listed.
+
+A domain is a folder ``<name>/`` holding ``spec.toml`` (its dictionary of questions and actions,
+what each question tests on the features, its environment and knobs), ``phrases.toml`` (how the
+synthetic generator words it), the code of its environment, and its shipped translator
+(``translator-<version>.pt``). The built-in ones live beside this file; a user adds their own
+robot by pointing ``NL2POLICY_DOMAINS`` at folders (os.pathsep-separated), each a domain folder
+or a folder of them. Extra folders join this package's ``__path__`` (as ``pkgutil.extend_path``
+does), so a domain's code is always ``nl2policy.domains.<name>`` and its relative imports, its
+envs' entry points and pickles work the same in worker processes, which find it the same way.
+
+Every domain's envs are registered with Gymnasium when this package is imported: the ids come
+from the folder's name (``spec.env_ids``), so a copy under a new name has ids of its own.
+"""
 
 from __future__ import annotations
 
+import os
+import tomllib
 from functools import lru_cache
+from pathlib import Path
 
 import gymnasium as gym
 
-from nl2policy.domains.spec import Domain, load_domain
+from nl2policy.domains.spec import Domain, env_ids, load_domain
 
-DOMAINS = ("taxi", "highway")
+BUILT_IN = Path(__file__).resolve().parent
+EXTRA_ENV = "NL2POLICY_DOMAINS"
 
-_ENTRY_POINTS = {
-    "nl2policy/Taxi-v0": "nl2policy.domains.taxi:TaxiEnv",
-    "nl2policy/Highway-v0": "nl2policy.domains.highway:HighwayFeatures",
-}
-for _env_id, _entry in _ENTRY_POINTS.items():
-    if _env_id not in gym.registry:
-        gym.register(_env_id, entry_point=_entry)
-# highway-env's scene, vectorized: one episode with gym.make, N with gym.make_vec.
-if "nl2policy/HighwayTwin-v0" not in gym.registry:
-    gym.register("nl2policy/HighwayTwin-v0", entry_point="nl2policy.domains.highway_vec:HighwayTwinEnv",
-                 vector_entry_point="nl2policy.domains.highway_vec:HighwayTwinVectorEnv")
+
+def _read_spec(folder: Path) -> dict:
+    try:
+        return tomllib.loads((folder / "spec.toml").read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ValueError(f"{folder / 'spec.toml'} cannot be read: {exc}") from None
+
+
+def _candidates(root: Path) -> list[Path]:
+    """`root` itself if it is a domain folder, else its subfolders that are."""
+    if (root / "spec.toml").is_file():
+        return [root]
+    return sorted(p for p in root.iterdir() if (p / "spec.toml").is_file()) if root.is_dir() else []
+
+
+def _discover() -> dict[str, Path]:
+    """Every domain folder by name: the built-in ones, then NL2POLICY_DOMAINS's, each group in
+    the order its specs' `order` keys give (then by name)."""
+    found: dict[str, Path] = {p.name: p for p in _candidates(BUILT_IN)}
+    for entry in filter(None, os.environ.get(EXTRA_ENV, "").split(os.pathsep)):
+        for folder in _candidates(Path(entry).expanduser().resolve()):
+            if not folder.name.isidentifier():
+                raise ValueError(f"{EXTRA_ENV}: a domain folder's name must be a Python identifier, not {folder.name!r}")
+            if folder.name in found and found[folder.name] != folder:
+                raise ValueError(f"{EXTRA_ENV}: domain {folder.name!r} in {folder.parent} is already {found[folder.name]}")
+            found[folder.name] = folder
+            if str(folder.parent) not in __path__:
+                __path__.append(str(folder.parent))
+
+    def order(item: tuple[str, Path]) -> tuple[bool, float, str]:
+        spec = _read_spec(item[1])
+        return item[1].parent != BUILT_IN, float(spec.get("order", float("inf"))), item[0]
+
+    return dict(sorted(found.items(), key=order))
+
+
+FOLDERS = _discover()
+DOMAINS = tuple(FOLDERS)
+
+
+def _register(name: str, folder: Path) -> None:
+    """Register the folder's envs under ids made from its name (an env named by id is Gymnasium's)."""
+    spec = _read_spec(folder)
+    env_id, train_id = env_ids(name, spec)
+    package = f"{__name__}.{name}"
+    if "entry_point" in spec.get("env", {}) and env_id not in gym.registry:
+        gym.register(env_id, entry_point=f"{package}.{spec['env']['entry_point']}")
+    if train_id is not None and train_id not in gym.registry:
+        train = spec["train_env"]
+        gym.register(train_id, entry_point=f"{package}.{train['entry_point']}",
+                     vector_entry_point=f"{package}.{train['vector_entry_point']}" if "vector_entry_point" in train else None)
+
+
+for _name, _folder in FOLDERS.items():
+    _register(_name, _folder)
 
 
 @lru_cache(maxsize=None)
 def get_domain(name: str) -> Domain:
-    """The domain called `name` ("taxi" or "highway"); a clear KeyError otherwise."""
-    if name not in DOMAINS:
+    """The domain called `name`; a clear KeyError naming the known ones otherwise."""
+    if name not in FOLDERS:
         raise KeyError(f"unknown domain {name!r}; choose one of: {', '.join(DOMAINS)}")
-    return load_domain(name)
+    return load_domain(FOLDERS[name], f"{__name__}.{name}")
 
 
 def make_env(name: str, **kwargs) -> gym.Env:

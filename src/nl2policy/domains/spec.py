@@ -1,5 +1,5 @@
-"""A domain's declarative spec: vocabulary wording from the corpus, plus what each question
-tests on the policy's input features.
+"""A domain's declarative spec (``domains/<name>/spec.toml``): its dictionary of questions and
+actions, what each question tests on the policy's input features, its environment, and its knobs.
 
 Every question is one linear test ``w . x > c`` on the feature vector. That single fact is
 what lets a lexical tree become a differentiable decision tree that acts exactly like it
@@ -25,10 +25,7 @@ from typing import Any, Callable, Mapping, Optional, Protocol, Sequence
 
 import numpy as np
 
-from nl2policy.data import corpus_dir
 from nl2policy.trees import Leaf, Tree, Vocabulary
-
-SPEC_DIR = Path(__file__).resolve().parent
 
 
 @dataclass(frozen=True)
@@ -88,7 +85,9 @@ class ExactModel(Protocol):
 class Domain:
     """Everything about a domain that is not the simulator itself."""
 
-    name: str
+    name: str  # the folder's name
+    folder: Path  # domains/<name>/: spec.toml, phrases.toml, the env's code, the shipped translator
+    package: str  # the folder as a Python package, where the spec's "module:attribute" entries are found
     vocab: Vocabulary
     features: tuple[str, ...]
     weights: np.ndarray = field(repr=False)  # (questions, features), rows in vocab order
@@ -96,18 +95,27 @@ class Domain:
     impossible: tuple[Mapping[str, bool], ...]
     env_id: str
     knobs: Knobs
-    exact_model: Optional[str] = None  # "module:factory" of an ExactModel, or None
+    exact_model: Optional[str] = None  # "module:factory" of an ExactModel in the folder, or None
     train_env_id: Optional[str] = None  # a registered vector env (vector entry point) that trains faster than env_id
     one_hot: tuple[str, ...] = ()  # features of which exactly one is 1 (taxi's place); see uniform_states
+    translator: Mapping[str, Any] = field(default_factory=dict)  # recipe settings this domain's shipped translator changes
+    ranges: tuple[tuple[float, float], ...] = ()  # per feature, the box uniform_states spreads over (default [0, 1])
     title: str = ""  # how people see the domain named (the app's domain menu)
     example: str = ""  # the description `nl2policy run` translates when given none
     briefing_section: Optional[str] = None  # the corpus briefing's "## <section>" about this domain
+    ceilings: Optional[str] = None  # a module in the folder with compute_ceilings / write_ceilings (nl2policy ceilings)
+    reference: Optional[str] = None  # "module:function" in the folder: a hand-written policy of features to actions, a yardstick
 
     @cached_property
     def phrases(self) -> dict[str, dict]:
-        """How the synthetic generator words this domain (phrases/NAME.toml): `questions` (per id:
+        """How the synthetic generator words this domain (its phrases.toml): `questions` (per id:
         pos, neg, short, short_no), `actions` and `reasons` (per id: lists of wordings)."""
-        return tomllib.loads((SPEC_DIR / "phrases" / f"{self.name}.toml").read_text())
+        return tomllib.loads((self.folder / "phrases.toml").read_text())
+
+    def attribute(self, entry: str) -> Any:
+        """The object a spec entry "module:attribute" names, the module found in this folder."""
+        module, _, attr = entry.partition(":")
+        return getattr(importlib.import_module(f"{self.package}.{module}"), attr)
 
     @cached_property
     def exact(self) -> Optional[ExactModel]:
@@ -115,17 +123,17 @@ class Domain:
         the policy code score a tree without sampling, asked for as a capability."""
         if self.exact_model is None:
             return None
-        module, factory = self.exact_model.split(":")
-        return getattr(importlib.import_module(module), factory)()
+        return self.attribute(self.exact_model)()
 
     def uniform_states(self, n: int, seed: int = 0) -> np.ndarray:
         """`n` feature vectors spread evenly over what the world can produce: with a one-hot
         group (taxi), one of its features set uniformly and every other feature 0 or 1;
-        otherwise uniform in the [0, 1] feature box (highway; far more mass near thresholds
-        than real traffic puts there)."""
+        otherwise uniform in the feature box, [0, 1] or the spec's [ranges] (highway, lunar; far
+        more mass near thresholds than the world puts there)."""
         rng = np.random.default_rng(seed)
         if not self.one_hot:
-            return rng.uniform(0.0, 1.0, size=(n, len(self.features))).astype(np.float32)
+            lo, hi = (np.array(r) for r in zip(*self.ranges)) if self.ranges else (0.0, 1.0)
+            return (lo + (hi - lo) * rng.uniform(0.0, 1.0, size=(n, len(self.features)))).astype(np.float32)
         group = np.eye(len(self.one_hot))[rng.integers(len(self.one_hot), size=n)]
         rest = [f for f in self.features if f not in self.one_hot]
         bits = rng.integers(2, size=(n, len(rest)))
@@ -189,35 +197,62 @@ class Domain:
         return all(a.act(ans) == b.act(ans) for ans in self.possible_answer_sets)
 
 
-def load_domain(name: str, corpus: Path | None = None) -> Domain:
-    spec_path = SPEC_DIR / f"{name}.toml"
-    if not spec_path.is_file():
-        known = sorted(p.stem for p in SPEC_DIR.glob("*.toml"))
-        raise KeyError(f"unknown domain {name!r}; known domains: {', '.join(known)}")
-    spec = tomllib.loads(spec_path.read_text())
-    vocabulary = json.loads(((corpus or corpus_dir()) / "vocabulary.json").read_text())
-    if name not in vocabulary:
-        raise KeyError(f"the corpus vocabulary has no domain {name!r}")
-    vocab = Vocabulary(name, dict(vocabulary[name]["questions"]), dict(vocabulary[name]["actions"]))
+ENV_PREFIX = "nl2policy/"
+
+
+def env_ids(name: str, spec: Mapping[str, Any]) -> tuple[str, Optional[str]]:
+    """(the env's id, the fast training env's id or None). An env whose code is in the folder
+    (``[env] entry_point``) is registered as nl2policy/<name>-v0 and its training twin as
+    nl2policy/<name>-train-v0, so a copied folder never collides with the original; an env
+    registered elsewhere (Gymnasium's own) is named by ``[env] id``."""
+    env, train = spec.get("env", {}), spec.get("train_env")
+    if ("id" in env) == ("entry_point" in env):
+        raise ValueError(f"{name}/spec.toml: [env] needs exactly one of id (a registered env) or entry_point (module:Class in the folder)")
+    env_id = env["id"] if "id" in env else f"{ENV_PREFIX}{name}-v0"
+    return env_id, (f"{ENV_PREFIX}{name}-train-v0" if train else None)
+
+
+def load_domain(folder: Path, package: str) -> Domain:
+    """The domain whose spec.toml is in `folder`; `package` is the folder as a Python package."""
+    name = folder.name
+    spec_path = folder / "spec.toml"
+    where = f"{name}/spec.toml"
+    try:
+        spec = tomllib.loads(spec_path.read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ValueError(f"{where}: cannot be read ({exc})") from None
+    for table in ("questions", "actions", "tests"):
+        if not spec.get(table):
+            raise ValueError(f"{where}: no [{table}] table")
+    vocab = Vocabulary(name, dict(spec["questions"]), dict(spec["actions"]))
     features: Sequence[str] = spec["features"]
     tests = spec["tests"]
     missing = set(vocab.questions) ^ set(tests)
     if missing:
-        raise ValueError(f"{spec_path.name}: questions and tests differ on {sorted(missing)}")
+        raise ValueError(f"{where}: questions and tests differ on {sorted(missing)}")
     weights = np.zeros((len(vocab.questions), len(features)))
     thresholds = np.zeros(len(vocab.questions))
     for i, q in enumerate(vocab.questions):
         for feat, w in tests[q]["weights"].items():
+            if feat not in features:
+                raise ValueError(f"{where}: question {q!r} weighs unknown feature {feat!r}")
             weights[i, features.index(feat)] = w
         thresholds[i] = tests[q]["threshold"]
     impossible = tuple(dict(rule) for rule in spec.get("impossible", []))
     one_hot = tuple(spec.get("one_hot", ()))
     if set(one_hot) - set(features):
-        raise ValueError(f"{spec_path.name}: one_hot names unknown features {sorted(set(one_hot) - set(features))}")
-    return Domain(name, vocab, tuple(features), weights, thresholds, impossible, spec["env_id"],
-                  _knobs(spec, spec_path.name), exact_model=spec.get("exact_model"), one_hot=one_hot,
-                  train_env_id=spec.get("train_env_id"), title=spec.get("title", name.capitalize()),
-                  example=spec.get("example", ""), briefing_section=spec.get("briefing_section"))
+        raise ValueError(f"{where}: one_hot names unknown features {sorted(set(one_hot) - set(features))}")
+    ranges = spec.get("ranges", {})
+    if set(ranges) - set(features) or (ranges and set(ranges) != set(features)):
+        raise ValueError(f"{where}: [ranges] must give every feature a [low, high] and name no other")
+    env_id, train_env_id = env_ids(name, spec)
+    return Domain(name, folder, package, vocab, tuple(features), weights, thresholds, impossible, env_id,
+                  _knobs(spec, where), exact_model=spec.get("exact_model"), one_hot=one_hot,
+                  train_env_id=train_env_id, title=spec.get("title", name.capitalize()),
+                  example=spec.get("example", ""), briefing_section=spec.get("briefing_section"),
+                  ceilings=spec.get("ceilings"), reference=spec.get("reference"),
+                  translator=dict(spec.get("translator", {})),
+                  ranges=tuple((float(ranges[f][0]), float(ranges[f][1])) for f in features) if ranges else ())
 
 
 def _knobs(spec: dict, file: str) -> Knobs:

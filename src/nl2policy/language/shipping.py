@@ -4,6 +4,7 @@ never import the training stack (augmentation, the synthetic generator, the trai
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from collections import Counter
 from pathlib import Path
@@ -15,7 +16,7 @@ from nl2policy.domains import DOMAINS, get_domain
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.dataset import member_pairs
 from nl2policy.language.members import default_workers, is_current
-from nl2policy.language.models.config import DEFAULT_MODEL, MODELS
+from nl2policy.language.models.config import DEFAULT_MODEL, MODELS, ModelConfig
 from nl2policy.language.text import tokenize
 from nl2policy.language.train import fit
 from nl2policy.language.translate import STOPWORDS, model_path
@@ -35,7 +36,7 @@ def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
     get_domain(domain)
     if name not in MODELS:
         raise KeyError(f"unknown model {name!r}; known: {', '.join(MODELS)}")
-    cfg = MODELS[name]
+    cfg = shipped_config(domain, name)
     path = model_path(domain, name, out)
     ckpt = path.with_suffix(".ckpt")
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -45,7 +46,9 @@ def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
         state = None
     specs = load_corpus(domain, rounds=TRAINING_ROUNDS)
     pairs = member_pairs(domain, specs, range(len(specs)), cfg, seed)
-    vocab_texts = [s.description for s in specs]  # the word vocabulary: real descriptions only
+    # the word vocabulary: real descriptions only; a domain nobody has described yet (lunar) has
+    # none, and takes its words from the first member's synthetic pairs
+    vocab_texts = [s.description for s in specs] or None
 
     def save_checkpoint(checkpoint: dict) -> None:
         tmp = ckpt.with_suffix(".tmp")
@@ -63,16 +66,50 @@ def train_default(domain: str, name: str = DEFAULT_MODEL, seed: int = 0,
     return path
 
 
+def shipped_config(domain: str, name: str = DEFAULT_MODEL) -> ModelConfig:
+    """The recipe `name` with the settings the domain's spec.toml changes ([translator]: lunar,
+    which nobody has described, trains on more synthetic pairs)."""
+    overrides = dict(get_domain(domain).translator)
+    unknown = set(overrides) - set(MODELS[name].to_dict())
+    if unknown:
+        raise ValueError(f"{domain}/spec.toml: [translator] has unknown settings {sorted(unknown)}")
+    return dataclasses.replace(MODELS[name], **overrides)
+
+
 def topic_lexicon(domain: str) -> dict[str, list[str]]:
-    """Words typical of each domain's descriptions (in >= 5 of its specs, >= 4x as often as
-    in the other domain's): the on-topic detector's evidence."""
-    df = {d: Counter(w for s in load_corpus(d, rounds=TRAINING_ROUNDS) for w in set(tokenize(s.description)))
-          for d in DOMAINS}
+    """Words typical of each domain's descriptions (in >= 5 of its specs, >= 4x as often as in
+    the other domains'): the on-topic detector's evidence. A domain nobody has described yet is
+    read from its own wording instead (its dictionary and phrases.toml, each string a document,
+    a word in >= 2 of them), so its lexicon is the domain's words, not a writer's."""
+    df, least = {}, {}
+    for d in DOMAINS:
+        texts = [s.description for s in load_corpus(d, rounds=TRAINING_ROUNDS)]
+        least[d] = 5 if texts else 2
+        df[d] = Counter(w for text in (texts or _own_wording(d)) for w in set(tokenize(text)))
     out = {}
     for d in DOMAINS:
         others = Counter()
         for o in DOMAINS:
             if o != d:
                 others.update(df[o])
-        out[d] = sorted(w for w, c in df[d].items() if c >= 5 and (c + 1) / (others[w] + 1) >= 4 and w not in STOPWORDS)
+        out[d] = sorted(w for w, c in df[d].items() if c >= least[d] and (c + 1) / (others[w] + 1) >= 4 and w not in STOPWORDS)
     return out
+
+
+def _own_wording(domain: str) -> list[str]:
+    """Every string in which the domain words itself: its dictionary and its phrases."""
+    d = get_domain(domain)
+    texts = list(d.vocab.questions.values()) + list(d.vocab.actions.values())
+
+    def strings(node) -> None:
+        if isinstance(node, str):
+            texts.append(node)
+        elif isinstance(node, dict):
+            for v in node.values():
+                strings(v)
+        elif isinstance(node, list):
+            for v in node:
+                strings(v)
+
+    strings(d.phrases)
+    return texts

@@ -56,8 +56,10 @@ class Translation:
                 "questions": [q.to_json() for q in self.questions]}
 
 
-SHIPPED_DIR = Path(__file__).resolve().parent.parent / "data" / "models"
-"""Trained default models that ship with the package (see its README.md for the command)."""
+def shipped_path(domain: str, name: str = DEFAULT_MODEL) -> Path:
+    """Where a domain's shipped translator lies: in its folder, as translator-<version>.pt
+    (domains/README.md has the command that trained it)."""
+    return get_domain(domain).folder / f"translator-{name}.pt"
 
 
 def model_dir() -> Path:
@@ -68,21 +70,22 @@ def model_dir() -> Path:
 
 
 def model_path(domain: str, name: str = DEFAULT_MODEL, folder: Optional[Path] = None) -> Path:
-    return (folder or model_dir()) / f"{domain}-{name}.pt"
+    """A model's file in `folder` (default: the user's models): DOMAIN-VERSION.pt, except in the
+    domain's own folder, where it is the shipped translator-VERSION.pt."""
+    folder = folder or model_dir()
+    if folder.resolve() == get_domain(domain).folder.resolve():
+        return shipped_path(domain, name)
+    return folder / f"{domain}-{name}.pt"
 
 
 def find_model(domain: str, name: str = DEFAULT_MODEL) -> Optional[Path]:
     """The user's trained model if there is one, else the shipped one, else None. A data folder
     that cannot be made has no user models: the shipped one still translates."""
     try:
-        folders = [model_dir(), SHIPPED_DIR]
+        paths = [model_path(domain, name, model_dir()), shipped_path(domain, name)]
     except OSError:
-        folders = [SHIPPED_DIR]
-    for folder in folders:
-        path = model_path(domain, name, folder)
-        if path.is_file():
-            return path
-    return None
+        paths = [shipped_path(domain, name)]
+    return next((path for path in paths if path.is_file()), None)
 
 
 @dataclass
@@ -91,16 +94,21 @@ class LoadedModel:
     lexicon: dict[str, set[str]]
 
 
-def load_model(path: Path) -> LoadedModel:
+def load_model(path: Path, domain: Optional[str] = None) -> LoadedModel:
+    """The translator in `path`, for `domain` (default: the one it was trained for; a copied
+    domain folder translates with its original's file under its own name)."""
     data = torch.load(path, weights_only=False)
     known = {f.name for f in fields(ModelConfig)}
     cfg = ModelConfig(**{k: v for k, v in data["cfg"].items() if k in known})  # (settings of deleted variants: off)
     states = data["nets"] if "nets" in data else [data["net"]]  # "net": files from before ensembles
-    translator = TrainedTranslator.from_states(data["domain"], data["name"], cfg, data["words"], states,
+    translator = TrainedTranslator.from_states(domain or data["domain"], data["name"], cfg, data["words"], states,
                                                MiniLMCache(max_items=256))
     if data.get("findings") is not None:
         translator.findings = FindingsModel.from_state(data["findings"], translator.cache)
-    return LoadedModel(translator, {d: set(ws) for d, ws in data["lexicon"].items()})
+    lexicon = {d: set(ws) for d, ws in data["lexicon"].items()}
+    if domain and domain != data["domain"] and data["domain"] in lexicon:  # a copied folder: its words are the original's
+        lexicon[domain] = lexicon.pop(data["domain"])
+    return LoadedModel(translator, lexicon)
 
 
 _LOADED: dict[tuple[str, str], LoadedModel] = {}
@@ -113,7 +121,7 @@ def get_model(domain: str, name: str = DEFAULT_MODEL) -> LoadedModel:
         path = find_model(domain, name)
         if path is None:
             path = model_path(domain, name)
-            print(f"No trained {name} translator for {domain} in {path.parent} or {SHIPPED_DIR}; "
+            print(f"No trained {name} translator for {domain} in {path.parent} or {get_domain(domain).folder}; "
                   "training it now (a few minutes)...",
                   file=sys.stderr)
             last = [-1]
@@ -129,7 +137,7 @@ def get_model(domain: str, name: str = DEFAULT_MODEL) -> LoadedModel:
             # members train in forked processes, unless other threads run here (a server):
             # a fork copies only this thread, and a lock another one holds stays locked
             shipping.train_default(domain, name, progress=report, workers=1 if threading.active_count() > 1 else None)
-        _LOADED[key] = load_model(path)
+        _LOADED[key] = load_model(path, domain)
     return _LOADED[key]
 
 

@@ -9,6 +9,7 @@ from typing import Optional
 
 import typer
 
+from nl2policy.domains import DOMAINS
 from nl2policy.limits import MAX_CLI_STEPS, MAX_EPISODES
 
 
@@ -18,13 +19,13 @@ def register(app: typer.Typer) -> None:
 
 
 def optimize(
-    domain: str = typer.Option(..., help="taxi or highway"),
+    domain: str = typer.Option(..., help=f"One of: {', '.join(DOMAINS)}"),
     tree: str = typer.Option(..., help="A tree as inline JSON or a path to a JSON file"),
     steps: int = typer.Option(20_000, max=MAX_CLI_STEPS, help="PPO env steps (whole rollouts: rounded up to a multiple of 512 for taxi, "
                                            "4,096 for highway on its twin, 256 on highway-env)"),
     seed: int = typer.Option(0),
     out: Path = typer.Option(Path("runs/optimize"), help="Output folder; holding a checkpoint, the run resumes"),
-    eval_episodes: Optional[int] = typer.Option(None, min=1, max=MAX_EPISODES, help="Episodes for the before/after returns (default: the domain's eval_episodes, domains/<name>.toml)"),
+    eval_episodes: Optional[int] = typer.Option(None, min=1, max=MAX_EPISODES, help="Episodes for the before/after returns (default: the domain's eval_episodes, domains/<name>/spec.toml)"),
     polish: Optional[bool] = typer.Option(None, "--polish/--no-polish", help="Hill-climb the kept tree over questions and actions: on the exact model (taxi), or on common sampled scenes of the fast simulator (highway); default on where the domain has either"),
     simulator: str = typer.Option("fast", help="Train on the domain's fast simulator (highway: the vectorized twin) or on its reference env (highway-env); returns are always the reference env's"),
 ) -> None:
@@ -62,21 +63,24 @@ def optimize(
 
 
 def ceilings(
-    domain: str = typer.Option(..., help="A domain with an exact model (taxi)"),
+    domain: str = typer.Option(..., help="A domain whose folder has a ceiling search (taxi)"),
     max_depth: int = typer.Option(3, min=1, max=3, help="Deepest dictionary trees to search (the grid allows 3)"),
     out: Path = typer.Option(Path("results/policy"), help="Folder for ceilings_<domain>.md / .json"),
 ) -> None:
     """The domain's yardsticks by exact search: optimum, best stationary feature policy, best trees."""
     from nl2policy.console import console, domain_or_fail, fail, out_dir_or_fail, progress_bar
-    from nl2policy.policy.ceilings_report import compute_ceilings, write_ceilings
+    import importlib
 
-    domain_or_fail(domain)
+    d = domain_or_fail(domain)
+    if d.ceilings is None:
+        fail(f"{domain} has no ceiling search (its spec.toml names no `ceilings` module)")
+    search = importlib.import_module(f"{d.package}.{d.ceilings}")
     out_dir_or_fail(out)
     command = f"nl2policy ceilings --domain {domain} --max-depth {max_depth} --out {out}"
     with progress_bar() as bar:
         task = bar.add_task(f"{domain}: ceilings", total=None)
         try:
-            result = compute_ceilings(domain, max_depth, progress=lambda text: bar.update(task, description=text))
+            result = search.compute_ceilings(domain, max_depth, progress=lambda text: bar.update(task, description=text))
         except ValueError as exc:
             fail(str(exc))
-    console.print(write_ceilings(result, out, command).read_text())
+    console.print(search.write_ceilings(result, out, command).read_text())

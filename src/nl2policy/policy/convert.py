@@ -5,7 +5,7 @@ Tree -> DDT (exact warm start). Every domain question is one linear test ``w . x
 exactly those ``w`` and ``c``; only the sharpness ``gamma`` is a choice. A leaf puts
 ``LEAF_MASS`` of its probability on the tree's action and spreads the rest evenly.
 
-Gamma and the leaf mass are the domain's knobs (``Domain.knobs``, from ``domains/<name>.toml``,
+Gamma and the leaf mass are the domain's knobs (``Domain.knobs``, from ``domains/<name>/spec.toml``,
 where each value's reason is written; measured agreement for several gammas:
 ``results/policy/fidelity.md``, made by ``python -m experiments.policy fidelity``). Why a leaf mass works:
 the tree's action must dominate (the fresh DDT should *drive* like the tree: its sampled actions
@@ -116,8 +116,8 @@ def ddt_to_tree(domain_name: str, ddt: DDT, tolerance: Optional[float] = None) -
     """A readable tree from a DDT: each node keeps its dominant feature and threshold, named
     as the nearest domain question with that feature and direction (branches swapped for a
     negated question) or kept as a raw test ``raw:<feature><op><threshold>``; each leaf keeps
-    its most likely action. Pruned: nodes whose threshold lies outside the [0, 1] feature box
-    (they always answer the same), questions whose answer the path already fixes (asked higher
+    its most likely action. Pruned: nodes whose threshold lies outside the feature box
+    (they always answer the same; the box is [0, 1] or the spec's [ranges]), questions whose answer the path already fixes (asked higher
     up, or ruled out by the world: "at the village?" under "at the airport? yes"), and nodes
     whose two branches came out identical. Each prune keeps the action in every state the world
     can produce (Domain.possible_answer_sets)."""
@@ -139,8 +139,9 @@ def ddt_to_tree(domain_name: str, ddt: DDT, tolerance: Optional[float] = None) -
             return build(yes_branch if -c[i] > 0 else no_branch, answered)
         threshold = c[i] / weight
         greater = weight > 0  # yes iff x_f > threshold (else x_f < threshold)
-        if threshold >= 1.0 or threshold <= 0.0:  # constant on the feature box [0, 1]
-            always_yes = (threshold < 0.0) if greater else (threshold > 1.0)
+        low, high = domain.ranges[f] if domain.ranges else (0.0, 1.0)
+        if threshold >= high or threshold <= low:  # constant on the feature box
+            always_yes = (threshold < low) if greater else (threshold > high)
             return build(yes_branch if always_yes else no_branch, answered)
         best = min((cand for cand in candidates if cand[1] == f), key=lambda cand: abs(cand[3] - threshold), default=None)
         if best is None or abs(best[3] - threshold) > tol:

@@ -10,8 +10,8 @@ improves the exact expected return:
 * a leaf becomes a question with two leaves (where the path has room: depth <= 3);
 * a question node becomes a leaf.
 
-Where no single edit improves, larger moves (they need the exact model's state tables, which
-taxi has): one proper subtree (any node below the root) is replaced by the best subtree its
+Where no single edit improves, larger moves, where the exact model offers them
+(``subtree_search()``: taxi's, in its folder's subtree.py): one proper subtree (any node below the root) is replaced by the best subtree its
 position allows (depth up to the 3-question limit), the rest of the tree fixed, scored exactly
 over every such subtree at once (``SubtreeSearch.best_replacement``); and, where that is stuck
 too, both branches of the root are re-solved together under the root's own question
@@ -111,7 +111,7 @@ def polish(domain: str, tree: Tree) -> Polished:
     start = time.perf_counter()
     value = start_value = float(exact.expected_return(tree_act_fn(domain, tree)))
     scored, rounds = 0, 0
-    subtrees = SubtreeSearch(domain) if hasattr(exact, "tables") else None
+    subtrees = exact.subtree_search(domain) if hasattr(exact, "subtree_search") else None
     while rounds < MAX_ROUNDS:
         candidates = neighbours(domain, tree)
         values = exact.expected_returns([tree_act_fn(domain, c) for c in candidates])
@@ -149,77 +149,6 @@ def _replace(tree: Tree, path: tuple[tuple[str, bool], ...], new: Tree) -> Tree:
     if answer:
         return Node(tree.question, _replace(tree.yes, rest, new), tree.no)
     return Node(tree.question, tree.yes, _replace(tree.no, rest, new))
-
-
-class SubtreeSearch:
-    """The best replacement of one proper subtree, exactly: every map from the states that reach
-    the subtree's position to actions that a subtree of the allowed depth induces (one tree per
-    map, taxi_ceilings.TreeMaps), each joined with the rest of the tree's policy and scored in
-    one batch on the exact model's tables."""
-
-    def __init__(self, domain: str) -> None:
-        from nl2policy.policy.taxi_ceilings import TreeMaps
-
-        self.domain = get_domain(domain)
-        self.tables = self.domain.exact.tables()
-        self.maps = TreeMaps(self.tables, domain)
-        self.reach = tuple(self.tables.reachable())
-        self.below_root: dict[str, float] = {}  # root question -> the best return under it, once searched
-
-    def _policy(self, tree: Tree):
-        """The tree's effective action in every reachable state (as TreeMaps.policies lays them out)."""
-        from nl2policy.domains.taxi_tables import effective_action
-
-        index = self.domain.action_index
-        row = [effective_action(self.tables.states[s], index(tree.act(self.maps.answers[s]))) for s in self.reach]
-        return self.maps.policies(self.reach, [tuple(row)])[0]
-
-    def best_replacement(self, tree: Tree, value: float) -> tuple[Optional[Tree], int]:
-        """(the best tree one subtree replacement away if it beats `value`, else None; maps scored)."""
-        import numpy as np
-
-        from nl2policy.policy.taxi_ceilings import _returns
-
-        base, best, best_value, scored = self._policy(tree), None, value + MIN_GAIN, 0
-        for path, _ in list(_positions(tree))[1:]:
-            states = tuple(s for s in self.reach if all(self.maps.answers[s][q] == a for q, a in path))
-            if not states:
-                continue
-            options = self.maps.realizable(states, MAX_DEPTH - len(path))
-            keys = list(options)
-            policies = np.repeat(base[None], len(keys), 0)
-            policies[:, list(states)] = np.array(keys)
-            values = _returns(self.tables, policies)
-            scored += len(keys)
-            for k in np.argsort(-values):
-                if values[k] <= best_value:
-                    break
-                try:
-                    candidate = validate(_normalize(_replace(tree, path, options[keys[k]])), self.domain.vocab)
-                except TreeError:
-                    continue
-                best, best_value = candidate, float(values[k])
-                break
-        return best, scored
-
-    def best_below_root(self, tree: Tree, value: float) -> tuple[Optional[Tree], int]:
-        """(the best tree with `tree`'s root question, both branches re-solved together, if it
-        beats `value`, else None; candidate pairs scored)."""
-        from nl2policy.policy.taxi_ceilings import best_tree
-
-        if not isinstance(tree, Node):
-            return None, 0
-        if self.below_root.get(tree.question, float("inf")) <= value + MIN_GAIN:
-            return None, 0  # searched under this root already, and `tree` is as good as its best
-        found = best_tree(self.tables, MAX_DEPTH, roots=[tree.question])
-        self.below_root[tree.question] = found.value if getattr(found.tree, "question", None) == tree.question else value
-        scored = found.counts["pairs_scored"]
-        if getattr(found.tree, "question", None) != tree.question or found.value <= value + MIN_GAIN:
-            return None, scored  # (a shallower incumbent with another root is not this move)
-        try:
-            return validate(_normalize(found.tree), self.domain.vocab), scored
-        except TreeError:
-            return None, scored
 
 
 @lru_cache(maxsize=32)

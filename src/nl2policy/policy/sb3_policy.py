@@ -6,7 +6,7 @@ which SB3's ``CategoricalDistribution`` takes as logits. The critic stays a smal
 (64-64), so value learning does not disturb the tree. Every method sees the same features.
 
 PPO's settings and the actor's learning-rate scale are the domain's knobs (``Domain.knobs``,
-``domains/<name>.toml``, with their reasons); ``make_ppo`` takes other knobs for experiments.
+``domains/<name>/spec.toml``, with their reasons); ``make_ppo`` takes other knobs for experiments.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The words a synthetic description is made of: the domain's own phrases for its questions and
-actions (domains/phrases/DOMAIN.toml), and general English (english.toml) for everything around
+actions (domains/DOMAIN/phrases.toml), and general English (english.toml) for everything around
 them, drawn with one random generator so a pair is reproducible from its seed."""
 
 from __future__ import annotations

@@ -57,7 +57,7 @@ class TaxiState(NamedTuple):
     tick: int
 
     def features(self) -> np.ndarray:
-        """The policy's input, in the order of taxi.toml's ``features``."""
+        """The policy's input, in the order of spec.toml's ``features``."""
         x = np.zeros(6, dtype=np.float32)
         x[self.place] = 1.0
         x[3], x[4], x[5] = float(self.passenger), float(self.heavy), float(self.long_wait)
@@ -226,7 +226,7 @@ def expected_return(model: TaxiModel, policy: Callable[[np.ndarray], int]) -> fl
 
 
 class TaxiExact:
-    """Taxi's exact model as the domain's capability (``taxi.toml``'s ``exact_model``):
+    """Taxi's exact model as the domain's capability (spec.toml's ``exact_model``):
     what ``Domain.exact`` returns, so policy code asks the domain instead of naming taxi."""
 
     def __init__(self, model: TaxiModel = TaxiModel()) -> None:
@@ -250,8 +250,14 @@ class TaxiExact:
         tables = self.tables()
         return float(tables.mixed_returns(np.asarray(action_probs(tables.features()))[None])[0])
 
+    def subtree_search(self, domain: str):
+        """The polish's larger moves on this model's tables (subtree.py)."""
+        from .subtree import SubtreeSearch
+
+        return SubtreeSearch(domain)
+
     def tables(self):
         """The model as arrays over feature states (``taxi_tables``), for exhaustive searches."""
-        from nl2policy.domains.taxi_tables import taxi_tables
+        from .tables import taxi_tables
 
         return taxi_tables(self.model)

@@ -2,7 +2,7 @@
 
 For a domain with an exact model in feature-state form (taxi): the optimum (value iteration,
 the tick seen), the best stationary policy on the features and the best dictionary trees of
-depth <= 1, 2 and 3, each found by the exact searches of ``taxi_ceilings`` (why each is the
+depth <= 1, 2 and 3, each found by the exact searches of ``ceilings`` (why each is the
 maximum: that module's doc), beside the best corpus tree on the same exact model.
 """
 
@@ -15,7 +15,7 @@ from typing import Callable, Optional
 from nl2policy.domains import get_domain
 from nl2policy.language.corpus import distinct_trees
 from nl2policy.policy.rollout import tree_policy
-from nl2policy.policy.taxi_ceilings import Ceiling, best_stationary_policy, best_tree
+from .ceilings import Ceiling, best_stationary_policy, best_tree
 from nl2policy.report import provenance
 from nl2policy.trees import parse_tree, to_text, tree_to_json
 
@@ -64,7 +64,7 @@ def write_ceilings(result: dict, out: Path, command: str) -> Path:
     st = result["best_stationary_policy"]
     lines = [f"# Ceilings ({domain}), exact", "", f"Made by: `{command}`  ", f"On: {meta['made']}", "",
              "Every value is an exact expected return on the exact model (no sampling). The searches are exhaustive "
-             "branch and bound with an admissible bound (`src/nl2policy/policy/taxi_ceilings.py` says why each result "
+             "branch and bound with an admissible bound (`src/nl2policy/domains/taxi/ceilings.py` says why each result "
              "is the maximum); counts say how much was looked at, seconds are on one core.", "",
              "| ceiling | return | % of optimum | searched | seconds |", "|---|---:|---:|---|---:|",
              f"| optimum (value iteration, the tick seen) | {opt:.4f} | 100.0 | - | - |",

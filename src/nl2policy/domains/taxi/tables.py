@@ -25,7 +25,7 @@ from typing import Callable
 
 import numpy as np
 
-from nl2policy.domains.taxi import AIRPORT, CITY, VILLAGE, WAIT, TaxiModel, TaxiState
+from .env import AIRPORT, CITY, VILLAGE, WAIT, TaxiModel, TaxiState
 
 N_ACTIONS = 4
 

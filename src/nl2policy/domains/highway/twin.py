@@ -66,8 +66,8 @@ from highway_env.envs.highway_env import HighwayEnvFast
 from highway_env.road.lane import AbstractLane
 from highway_env.vehicle.behavior import IDMVehicle
 
-from nl2policy.domains.highway import BASE_CONFIG, RANGE, SPEED_SCALE
-from nl2policy.domains.highway_geometry import (
+from .env import BASE_CONFIG, RANGE, SPEED_SCALE
+from .geometry import (
     DIAGONAL, EGO_SPEED, IDM, KP_A, KP_HEADING, KP_LATERAL, LANE_WIDTH, LENGTH, MAX_SPEED, MAX_STEERING, MIN_SPEED,
     ROAD_LENGTH, TARGET_SPEEDS, RoadOrder, not_zero, separating_axes, wrap_to_pi)
 

@@ -4,7 +4,7 @@ the seven highway questions test.
 The base env is ``highway-fast-v0`` (highway-env's cheaper variant: 5 Hz simulation, one
 decision per second, 30 s episodes, 20 other cars) with a Kinematics observation of the ego
 car and its 4 nearest neighbours, ahead or behind, in metres (not normalized, so the
-thresholds in highway.toml read as distances and speeds). ``HighwayFeatures`` turns that
+thresholds in spec.toml read as distances and speeds). ``HighwayFeatures`` turns that
 observation into six interpretable features and maps our five action ids onto highway-env's
 discrete meta-actions. Reward is highway-env's own: speed in [20, 30] m/s and the right lanes
 pay, a crash costs and ends the episode.

@@ -47,9 +47,11 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from nl2policy.domains import get_domain
-from nl2policy.domains.taxi import WAIT
-from nl2policy.domains.taxi_tables import N_ACTIONS, TaxiTables, effective_action
+from .env import WAIT
+from .tables import N_ACTIONS, TaxiTables, effective_action
 from nl2policy.trees import Leaf, Node, Tree
+
+DOMAIN = __package__.rpartition(".")[2]  # this folder's name is its domain's (a copy is another domain)
 
 TOLERANCE = 1e-9  # bounds and returns agree to ~1e-15; a candidate within this of the incumbent is kept
 CHUNK = 4096  # policies scored per batched call (memory: CHUNK x 24 x 4 x 24 floats)
@@ -145,7 +147,7 @@ def best_stationary_policy(tables: TaxiTables, progress: Progress = None,
 @lru_cache(maxsize=2)
 def _optimal_counts(tables: TaxiTables) -> np.ndarray:
     """How often each effective action is optimal in each feature state, over the ticks."""
-    from nl2policy.domains.taxi import optimal_policy
+    from .env import optimal_policy
 
     counts = np.zeros((tables.n_states, N_ACTIONS))
     index = {s: i for i, s in enumerate(tables.states)}
@@ -171,7 +173,7 @@ class TreeMaps:
     """The maps from states to effective actions that trees of the domain's questions induce
     (module doc), each with one tree that induces it."""
 
-    def __init__(self, tables: TaxiTables, domain: str = "taxi") -> None:
+    def __init__(self, tables: TaxiTables, domain: str = DOMAIN) -> None:
         self.tables = tables
         self.domain = get_domain(domain)
         self.answers = [self.domain.answers(s.features()) for s in tables.states]

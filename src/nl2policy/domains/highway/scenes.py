@@ -1,4 +1,4 @@
-"""Moving one scene between highway-env and the vectorized twin (domains/highway_twin.py), car by car.
+"""Moving one scene between highway-env and the vectorized twin (twin.py), car by car.
 
 Kept apart from the twin's simulation: these read and write highway-env's vehicle objects, which
 the twin itself never touches. They serve the fidelity check (experiments/highway_fidelity.py:
@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from nl2policy.domains.highway_geometry import IDM
-from nl2policy.domains.highway_twin import HighwayTwin
+from .geometry import IDM
+from .twin import HighwayTwin
 
 
 def copy_scene_to(env: Any, twin: HighwayTwin, episode: int) -> None:

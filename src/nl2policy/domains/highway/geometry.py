@@ -4,7 +4,7 @@ Every constant is read from the highway-env class that owns it (a changed consta
 the twin too); the functions are highway-env's per-object rules (``utils.not_zero``,
 ``utils.wrap_to_pi``, ``utils.are_polygons_intersecting``) over arrays of cars, and ``RoadOrder``
 finds each car's nearest neighbours along the road without comparing all pairs. Split from
-``highway_twin.py`` so that the twin's module holds the scene and its step, and this one the
+``twin.py`` so that the twin's module holds the scene and its step, and this one the
 geometry they are built from.
 """
 

@@ -1,10 +1,10 @@
 """The highway twin (``highway_twin.HighwayTwin``) behind the interfaces RL code expects.
 
-* ``HighwayTwinEnv``: one episode as a ``gymnasium.Env`` (``nl2policy/HighwayTwin-v0``), with
-  the same spaces and action order as ``nl2policy/Highway-v0``, for the env checker and for
+* ``HighwayTwinEnv``: one episode as a ``gymnasium.Env`` (``nl2policy/highway-train-v0``), with
+  the same spaces and action order as ``nl2policy/highway-v0``, for the env checker and for
   code that steps one episode.
 * ``HighwayTwinVectorEnv``: N episodes as a ``gymnasium.vector.VectorEnv``, what
-  ``gymnasium.make_vec("nl2policy/HighwayTwin-v0", num_envs=N)`` builds. It resets finished
+  ``gymnasium.make_vec("nl2policy/highway-train-v0", num_envs=N)`` builds. It resets finished
   episodes in the same step (``AutoresetMode.SAME_STEP``: the last observation is in
   ``info["final_obs"]``), as Stable-Baselines3 expects.
 
@@ -24,8 +24,8 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from nl2policy.domains.highway import META_ACTION
-from nl2policy.domains.highway_twin import HighwayTwin, TwinConfig
+from .env import META_ACTION
+from .twin import HighwayTwin, TwinConfig
 
 _META = np.asarray(META_ACTION, dtype=np.int64)
 OBSERVATION_SPACE = spaces.Box(0.0, 1.0, shape=(6,), dtype=np.float32)
@@ -39,13 +39,13 @@ def _info(twin: HighwayTwin, i: int) -> dict:
 
 
 class HighwayTwinEnv(gym.Env):
-    """One twin episode as a Gymnasium env: a drop-in for ``nl2policy/Highway-v0``."""
+    """One twin episode as a Gymnasium env: a drop-in for ``nl2policy/highway-v0``."""
 
     metadata = {"render_modes": [], "render_fps": 1}
 
     def __init__(self, render_mode: Optional[str] = None, config: Optional[dict] = None) -> None:
         if render_mode is not None:
-            raise ValueError("the highway twin does not render; use nl2policy/Highway-v0 to watch a policy")
+            raise ValueError("the highway twin does not render; use nl2policy/highway-v0 to watch a policy")
         # Seeded as highway-env seeds itself: reset(seed=s) gives highway-env's scene for s.
         self.twin = HighwayTwin(1, TwinConfig.from_highway_env(config), seeding="highway-env")
         self.observation_space = OBSERVATION_SPACE
