@@ -16,23 +16,15 @@ from the folder's name (``spec.env_ids``), so a copy under a new name has ids of
 from __future__ import annotations
 
 import os
-import tomllib
 from functools import lru_cache
 from pathlib import Path
 
 import gymnasium as gym
 
-from nl2policy.domains.spec import Domain, env_ids, load_domain
+from nl2policy.domains.spec import Domain, env_ids, load_domain, read_spec
 
 BUILT_IN = Path(__file__).resolve().parent
 EXTRA_ENV = "NL2POLICY_DOMAINS"
-
-
-def _read_spec(folder: Path) -> dict:
-    try:
-        return tomllib.loads((folder / "spec.toml").read_text())
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise ValueError(f"{folder / 'spec.toml'} cannot be read: {exc}") from None
 
 
 def _candidates(root: Path) -> list[Path]:
@@ -42,9 +34,9 @@ def _candidates(root: Path) -> list[Path]:
     return sorted(p for p in root.iterdir() if (p / "spec.toml").is_file()) if root.is_dir() else []
 
 
-def _discover() -> dict[str, Path]:
-    """Every domain folder by name: the built-in ones, then NL2POLICY_DOMAINS's, each group in
-    the order its specs' `order` keys give (then by name)."""
+def _discover() -> dict[str, tuple[Path, dict]]:
+    """Every domain folder with its spec, by name: the built-in ones, then NL2POLICY_DOMAINS's,
+    each group in the order its specs' `order` keys give (then by name)."""
     found: dict[str, Path] = {p.name: p for p in _candidates(BUILT_IN)}
     for entry in filter(None, os.environ.get(EXTRA_ENV, "").split(os.pathsep)):
         for folder in _candidates(Path(entry).expanduser().resolve()):
@@ -56,20 +48,22 @@ def _discover() -> dict[str, Path]:
             if str(folder.parent) not in __path__:
                 __path__.append(str(folder.parent))
 
-    def order(item: tuple[str, Path]) -> tuple[bool, float, str]:
-        spec = _read_spec(item[1])
-        return item[1].parent != BUILT_IN, float(spec.get("order", float("inf"))), item[0]
+    specs = {name: (folder, read_spec(folder)) for name, folder in found.items()}
 
-    return dict(sorted(found.items(), key=order))
+    def order(item: tuple[str, tuple[Path, dict]]) -> tuple[bool, float, str]:
+        folder, spec = item[1]
+        return folder.parent != BUILT_IN, float(spec.get("order", float("inf"))), item[0]
+
+    return dict(sorted(specs.items(), key=order))
 
 
-FOLDERS = _discover()
+_SPECS = _discover()
+FOLDERS = {name: folder for name, (folder, _) in _SPECS.items()}
 DOMAINS = tuple(FOLDERS)
 
 
-def _register(name: str, folder: Path) -> None:
+def _register(name: str, spec: dict) -> None:
     """Register the folder's envs under ids made from its name (an env named by id is Gymnasium's)."""
-    spec = _read_spec(folder)
     env_id, train_id = env_ids(name, spec)
     package = f"{__name__}.{name}"
     if "entry_point" in spec.get("env", {}) and env_id not in gym.registry:
@@ -80,8 +74,8 @@ def _register(name: str, folder: Path) -> None:
                      vector_entry_point=f"{package}.{train['vector_entry_point']}" if "vector_entry_point" in train else None)
 
 
-for _name, _folder in FOLDERS.items():
-    _register(_name, _folder)
+for _name, (_, _spec) in _SPECS.items():
+    _register(_name, _spec)
 
 
 @lru_cache(maxsize=None)
@@ -89,7 +83,8 @@ def get_domain(name: str) -> Domain:
     """The domain called `name`; a clear KeyError naming the known ones otherwise."""
     if name not in FOLDERS:
         raise KeyError(f"unknown domain {name!r}; choose one of: {', '.join(DOMAINS)}")
-    return load_domain(FOLDERS[name], f"{__name__}.{name}")
+    folder, spec = _SPECS[name]
+    return load_domain(folder, f"{__name__}.{name}", spec)
 
 
 def make_env(name: str, **kwargs) -> gym.Env:

@@ -112,10 +112,18 @@ class Domain:
         pos, neg, short, short_no), `actions` and `reasons` (per id: lists of wordings)."""
         return tomllib.loads((self.folder / "phrases.toml").read_text())
 
+    def module(self, name: str) -> Any:
+        """The module `name` of this folder (a spec entry such as `ceilings`)."""
+        return importlib.import_module(f"{self.package}.{name}")
+
     def attribute(self, entry: str) -> Any:
         """The object a spec entry "module:attribute" names, the module found in this folder."""
         module, _, attr = entry.partition(":")
-        return getattr(importlib.import_module(f"{self.package}.{module}"), attr)
+        return getattr(self.module(module), attr)
+
+    def feature_box(self, i: int) -> tuple[float, float]:
+        """(low, high) of feature `i`: the spec's [ranges], else [0, 1]."""
+        return self.ranges[i] if self.ranges else (0.0, 1.0)
 
     @cached_property
     def exact(self) -> Optional[ExactModel]:
@@ -132,7 +140,7 @@ class Domain:
         more mass near thresholds than the world puts there)."""
         rng = np.random.default_rng(seed)
         if not self.one_hot:
-            lo, hi = (np.array(r) for r in zip(*self.ranges)) if self.ranges else (0.0, 1.0)
+            lo, hi = np.array([self.feature_box(i) for i in range(len(self.features))]).T
             return (lo + (hi - lo) * rng.uniform(0.0, 1.0, size=(n, len(self.features)))).astype(np.float32)
         group = np.eye(len(self.one_hot))[rng.integers(len(self.one_hot), size=n)]
         rest = [f for f in self.features if f not in self.one_hot]
@@ -200,6 +208,14 @@ class Domain:
 ENV_PREFIX = "nl2policy/"
 
 
+def read_spec(folder: Path) -> dict:
+    """The folder's spec.toml as a dict; a ValueError naming the file if it cannot be read."""
+    try:
+        return tomllib.loads((folder / "spec.toml").read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ValueError(f"{folder.name}/spec.toml: cannot be read ({exc})") from None
+
+
 def env_ids(name: str, spec: Mapping[str, Any]) -> tuple[str, Optional[str]]:
     """(the env's id, the fast training env's id or None). An env whose code is in the folder
     (``[env] entry_point``) is registered as nl2policy/<name>-v0 and its training twin as
@@ -212,15 +228,12 @@ def env_ids(name: str, spec: Mapping[str, Any]) -> tuple[str, Optional[str]]:
     return env_id, (f"{ENV_PREFIX}{name}-train-v0" if train else None)
 
 
-def load_domain(folder: Path, package: str) -> Domain:
-    """The domain whose spec.toml is in `folder`; `package` is the folder as a Python package."""
+def load_domain(folder: Path, package: str, spec: Optional[dict] = None) -> Domain:
+    """The domain whose spec.toml is in `folder` (`spec`: that file, where it was read already);
+    `package` is the folder as a Python package."""
     name = folder.name
-    spec_path = folder / "spec.toml"
     where = f"{name}/spec.toml"
-    try:
-        spec = tomllib.loads(spec_path.read_text())
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise ValueError(f"{where}: cannot be read ({exc})") from None
+    spec = read_spec(folder) if spec is None else spec
     for table in ("questions", "actions", "tests"):
         if not spec.get(table):
             raise ValueError(f"{where}: no [{table}] table")
@@ -243,7 +256,7 @@ def load_domain(folder: Path, package: str) -> Domain:
     if set(one_hot) - set(features):
         raise ValueError(f"{where}: one_hot names unknown features {sorted(set(one_hot) - set(features))}")
     ranges = spec.get("ranges", {})
-    if set(ranges) - set(features) or (ranges and set(ranges) != set(features)):
+    if ranges and set(ranges) != set(features):
         raise ValueError(f"{where}: [ranges] must give every feature a [low, high] and name no other")
     env_id, train_env_id = env_ids(name, spec)
     return Domain(name, folder, package, vocab, tuple(features), weights, thresholds, impossible, env_id,

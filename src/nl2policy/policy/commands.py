@@ -69,12 +69,11 @@ def ceilings(
 ) -> None:
     """The domain's yardsticks by exact search: optimum, best stationary feature policy, best trees."""
     from nl2policy.console import console, domain_or_fail, fail, out_dir_or_fail, progress_bar
-    import importlib
 
     d = domain_or_fail(domain)
     if d.ceilings is None:
         fail(f"{domain} has no ceiling search (its spec.toml names no `ceilings` module)")
-    search = importlib.import_module(f"{d.package}.{d.ceilings}")
+    search = d.module(d.ceilings)
     out_dir_or_fail(out)
     command = f"nl2policy ceilings --domain {domain} --max-depth {max_depth} --out {out}"
     with progress_bar() as bar:

@@ -139,7 +139,7 @@ def ddt_to_tree(domain_name: str, ddt: DDT, tolerance: Optional[float] = None) -
             return build(yes_branch if -c[i] > 0 else no_branch, answered)
         threshold = c[i] / weight
         greater = weight > 0  # yes iff x_f > threshold (else x_f < threshold)
-        low, high = domain.ranges[f] if domain.ranges else (0.0, 1.0)
+        low, high = domain.feature_box(f)
         if threshold >= high or threshold <= low:  # constant on the feature box
             always_yes = (threshold < low) if greater else (threshold > high)
             return build(yes_branch if always_yes else no_branch, answered)

@@ -47,9 +47,10 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from nl2policy.domains import get_domain
+from nl2policy.trees import Leaf, Node, Tree
+
 from .env import WAIT
 from .tables import N_ACTIONS, TaxiTables, effective_action
-from nl2policy.trees import Leaf, Node, Tree
 
 DOMAIN = __package__.rpartition(".")[2]  # this folder's name is its domain's (a copy is another domain)
 

@@ -15,9 +15,10 @@ from typing import Callable, Optional
 from nl2policy.domains import get_domain
 from nl2policy.language.corpus import distinct_trees
 from nl2policy.policy.rollout import tree_policy
-from .ceilings import Ceiling, best_stationary_policy, best_tree
 from nl2policy.report import provenance
 from nl2policy.trees import parse_tree, to_text, tree_to_json
+
+from .ceilings import Ceiling, best_stationary_policy, best_tree
 
 ACTION_NAMES = ("go_airport", "go_village", "go_city", "wait")
 
