@@ -64,9 +64,23 @@ def test_a_copied_domain_folder_is_a_new_domain_with_no_other_file_changed(tmp_p
     assert out["app"] == "Taxi"
 
 
-def test_a_domain_folder_that_shadows_a_built_in_one_is_refused(tmp_path):
+def test_a_domain_folder_that_shadows_a_built_in_one_is_refused_in_one_line(tmp_path):
     robots = tmp_path / "robots"
     shutil.copytree(get_domain("taxi").folder, robots / "taxi", ignore=shutil.ignore_patterns("__pycache__"))
     env = {**os.environ, "NL2POLICY_DOMAINS": str(robots)}
-    proc = subprocess.run([sys.executable, "-c", "import nl2policy.domains"], capture_output=True, text=True, env=env, timeout=120)
+    code = "import sys; from nl2policy.cli import main; sys.exit(main())"
+    proc = subprocess.run([sys.executable, "-c", code, "translate", "--domain", "taxi", "go to the city"],
+                          capture_output=True, text=True, env=env, timeout=120)
     assert proc.returncode != 0 and "domain 'taxi'" in proc.stderr and "already" in proc.stderr
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_a_broken_spec_in_a_users_folder_is_one_line_not_a_traceback(tmp_path):
+    (tmp_path / "robot").mkdir()
+    (tmp_path / "robot" / "spec.toml").write_text("not = [toml")
+    env = {**os.environ, "NL2POLICY_DOMAINS": str(tmp_path)}
+    code = "import sys; from nl2policy.cli import main; sys.exit(main())"
+    proc = subprocess.run([sys.executable, "-c", code, "translate", "--domain", "taxi", "go to the city"],
+                          capture_output=True, text=True, env=env, timeout=120)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.strip().splitlines() == [proc.stderr.strip()] and "robot/spec.toml: cannot be read" in proc.stderr

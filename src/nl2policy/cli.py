@@ -97,7 +97,9 @@ def main() -> None:  # pragma: no cover - console entry
 
     terminal.owns_process = True
 
-    problem = argv_problem(sys.argv[1:])
+    from nl2policy.domains import PROBLEMS
+
+    problem = argv_problem(sys.argv[1:]) or "; ".join(PROBLEMS)
     if problem:
         err.print(f"[bold red]error:[/] {problem}", highlight=False, soft_wrap=True)
         sys.exit(2)

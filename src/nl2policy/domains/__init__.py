@@ -25,6 +25,9 @@ from nl2policy.domains.spec import Domain, env_ids, load_domain, read_spec
 
 BUILT_IN = Path(__file__).resolve().parent
 EXTRA_ENV = "NL2POLICY_DOMAINS"
+PROBLEMS: list[str] = []
+"""Why a folder NL2POLICY_DOMAINS names was left out (a broken spec, a name taken): importing
+this package never fails on a user's folder; the command line refuses to run until it is fixed."""
 
 
 def _candidates(root: Path) -> list[Path]:
@@ -37,18 +40,20 @@ def _candidates(root: Path) -> list[Path]:
 def _discover() -> dict[str, tuple[Path, dict]]:
     """Every domain folder with its spec, by name: the built-in ones, then NL2POLICY_DOMAINS's,
     each group in the order its specs' `order` keys give (then by name)."""
-    found: dict[str, Path] = {p.name: p for p in _candidates(BUILT_IN)}
+    specs = {p.name: (p, read_spec(p)) for p in _candidates(BUILT_IN)}
     for entry in filter(None, os.environ.get(EXTRA_ENV, "").split(os.pathsep)):
         for folder in _candidates(Path(entry).expanduser().resolve()):
-            if not folder.name.isidentifier():
-                raise ValueError(f"{EXTRA_ENV}: a domain folder's name must be a Python identifier, not {folder.name!r}")
-            if folder.name in found and found[folder.name] != folder:
-                raise ValueError(f"{EXTRA_ENV}: domain {folder.name!r} in {folder.parent} is already {found[folder.name]}")
-            found[folder.name] = folder
+            try:
+                if not folder.name.isidentifier():
+                    raise ValueError(f"a domain folder's name must be a Python identifier, not {folder.name!r}")
+                if folder.name in specs and specs[folder.name][0] != folder:
+                    raise ValueError(f"domain {folder.name!r} in {folder.parent} is already {specs[folder.name][0]}")
+                specs[folder.name] = (folder, read_spec(folder))
+            except ValueError as exc:  # the user's folder, not the package: said once, by whoever runs (cli.main)
+                PROBLEMS.append(f"{EXTRA_ENV}: {exc}")
+                continue
             if str(folder.parent) not in __path__:
                 __path__.append(str(folder.parent))
-
-    specs = {name: (folder, read_spec(folder)) for name, folder in found.items()}
 
     def order(item: tuple[str, tuple[Path, dict]]) -> tuple[bool, float, str]:
         folder, spec = item[1]
@@ -91,4 +96,4 @@ def make_env(name: str, **kwargs) -> gym.Env:
     return gym.make(get_domain(name).env_id, **kwargs)
 
 
-__all__ = ["DOMAINS", "Domain", "get_domain", "make_env"]
+__all__ = ["DOMAINS", "PROBLEMS", "Domain", "get_domain", "make_env"]
