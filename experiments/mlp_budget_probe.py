@@ -2,7 +2,7 @@
 
 Issue 27 asks Table 2 to give every method enough steps for the MLP to plateau. This runs the
 grid's own `run_one` for the MLP (same PPO settings, same probe: the greedy policy scored
-exactly on taxi, on ``PROBE_EPISODES`` common twin scenes on highway) for a long budget and
+exactly on taxi, on ``probe_episodes`` common twin scenes on highway) for a long budget and
 writes the probes and the rolling training reward, so the table's budget is read off a curve
 and not guessed. Resumable (the run's checkpoint); `--summarize-only` writes the file from an
 unfinished run's state.json.

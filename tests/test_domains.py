@@ -177,7 +177,7 @@ def test_a_domain_names_itself_gives_an_example_and_finds_its_briefing(domain, t
     from nl2policy.language.translate import translate
 
     d = get_domain(domain)
-    assert d.title and d.example
+    assert d.title and d.example and d.example_tree is not None
     assert translate(domain, d.example).tree is not None
     with TestClient(create_app(tmp_path / "a.sqlite", tmp_path, results_dir=tmp_path), base_url="http://127.0.0.1") as client:
         assert client.get("/api/domains").json()[domain]["title"] == d.title
@@ -185,3 +185,42 @@ def test_a_domain_names_itself_gives_an_example_and_finds_its_briefing(domain, t
         assert len(briefing) > 200
         # the corpus briefing's own section, or (a domain nobody has described) its dictionary
         assert (d.briefing_section is not None) or all(q in briefing for q in d.vocab.questions.values())
+
+
+@pytest.mark.parametrize("domain", [pytest.param(d, marks=pytest.mark.xfail(
+    d == "lunar", strict=True, reason="issue 43, open: lunar's synthetic-only translator swaps the last question's "
+    "branches (conf 0.04); a retrain with 3,000 pairs and two more postfix forms did worse (dropped tilted_right)"))
+    for d in DOMAINS])
+def test_the_shipped_translator_reads_the_domains_example_as_its_tree(domain):
+    """The example `nl2policy run` and the README show is translated as the spec says it means."""
+    from nl2policy.language.translate import translate
+
+    d = get_domain(domain)
+    assert translate(domain, d.example).tree == d.example_tree
+
+
+def test_an_example_tree_outside_the_dictionary_is_a_clear_error(tmp_path):
+    import shutil
+    from nl2policy.domains.spec import load_domain
+
+    folder = tmp_path / "copy"
+    shutil.copytree(get_domain("taxi").folder, folder)
+    spec = (folder / "spec.toml").read_text()
+    (folder / "spec.toml").write_text(spec.replace('example_tree = { if = "has_passenger"', 'example_tree = { if = "has_rocket"'))
+    with pytest.raises(ValueError, match="example_tree"):
+        load_domain(folder, "copy")
+
+
+def test_lunar_vector_env_shows_repeated_policies_the_same_scenes():
+    """The reset option repeat gives block k of the vector env the scenes of block 0, seeded as
+    rollout.evaluate seeds its episodes, so policies are compared on common random numbers."""
+    import gymnasium as gym
+
+    env = gym.make_vec(get_domain("lunar").train_env_id, num_envs=6, vectorization_mode="vector_entry_point")
+    obs, _ = env.reset(seed=7, options={"repeat": 2})
+    single, _ = gym.make("LunarLander-v3").reset(seed=8)
+    np.testing.assert_array_equal(obs[:3], obs[3:])
+    np.testing.assert_array_equal(obs[1], single)
+    with pytest.raises(ValueError, match="repeat"):
+        env.reset(seed=0, options={"repeat": 4})
+    env.close()

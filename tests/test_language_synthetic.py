@@ -134,3 +134,34 @@ def test_the_general_lexicon_names_no_domain_word():
             for part in q.split("_"):
                 if len(part) > 5:  # (not "ahead": "go ahead and ..." is anyone's English)
                     assert part not in text, (domain, part)
+
+
+
+def test_styles_limits_every_style_a_description_uses_and_an_empty_choice_is_an_error(monkeypatch):
+    """Leave-style-out trains on some styles only: a held-out style must not come back through
+    the closing summary (written as arrows or rules) either."""
+    import functools
+
+    import nl2policy.language.synthetic as gen
+
+    used: list[str] = []
+
+    def recording(f):
+        @functools.wraps(f)
+        def wrapper(*args, **kwargs):
+            used.append(f.__name__)
+            return f(*args, **kwargs)
+        return wrapper
+
+    monkeypatch.setattr(gen, "STYLES", {k: recording(f) for k, f in gen.STYLES.items()})
+    monkeypatch.setattr(gen, "arrows", recording(gen.arrows))
+    monkeypatch.setattr(gen, "rules", recording(gen.rules))
+    tree = get_domain("taxi").example_tree
+    rng = random.Random(0)
+    for _ in range(300):
+        describe(tree, "taxi", rng, styles={"qa", "rules"})
+    assert set(used) == {"qa", "rules"}  # both drawn, summaries included; arrows (a summary form) never
+    used.clear()
+    assert len(synthetic_pairs("taxi", 50, 0, styles={"nested"})) == 50 and set(used) == {"nested"}
+    with pytest.raises(ValueError, match="no style"):
+        describe(tree, "taxi", rng, styles=set())

@@ -61,13 +61,13 @@ def test_tiny_experiment_writes_table_and_skips_finished_runs(tmp_path):
 
 
 def test_sampled_probe_scores_the_start_tree_on_the_probe_scenes():
-    """Highway has no exact model: the probe plays the handed-back policy on PROBE_EPISODES
+    """Highway has no exact model: the probe plays the handed-back policy on probe_episodes("highway")
     common scenes of the twin; at step 0 a tree-DDT hands back its start tree, so the probe's
     return is the tree's own on those scenes, and the soft policy's is a different number."""
     from nl2policy.domains import get_domain
     from nl2policy.language.corpus import load_corpus
     from nl2policy.policy.convert import tree_batch_act_fn
-    from experiments.policy.table2 import PROBE_EPISODES, policy_probe
+    from experiments.policy.table2 import policy_probe, probe_episodes
     from nl2policy.policy.optimize import EVAL_SEED
     from nl2policy.policy.rollout import evaluate_batched
     from nl2policy.policy.sb3_policy import make_ppo
@@ -75,7 +75,7 @@ def test_sampled_probe_scores_the_start_tree_on_the_probe_scenes():
     tree = load_corpus("highway")[0].tree
     model = make_ppo("highway", "tree_ddt", 0, tree)
     probe = policy_probe("highway", "tree_ddt")(model)
-    own = evaluate_batched("highway", tree_batch_act_fn("highway", tree), PROBE_EPISODES, EVAL_SEED).mean_return
+    own = evaluate_batched("highway", tree_batch_act_fn("highway", tree), probe_episodes("highway"), EVAL_SEED).mean_return
     assert probe["policy"] == own and probe["soft"] != own
     mlp = policy_probe("highway", "mlp")(make_ppo("highway", "mlp", 0))
     assert set(mlp) == {"policy", "soft"} and get_domain("highway").exact is None
@@ -106,7 +106,7 @@ def test_highway_trees_are_judged_on_the_probe_scenes_not_the_ones_that_chose_th
     and polished trees on the probe's scenes, once (a finished run gains the scores when read)."""
     from nl2policy.language.corpus import load_corpus
     from nl2policy.policy.convert import tree_batch_act_fn
-    from experiments.policy.table2 import PROBE_EPISODES, judge_trees, summarize
+    from experiments.policy.table2 import judge_trees, probe_episodes, summarize
     from nl2policy.policy.keep_best import tree_scorer
     from nl2policy.policy.optimize import EVAL_SEED
     from nl2policy.policy.rollout import evaluate_batched
@@ -119,7 +119,7 @@ def test_highway_trees_are_judged_on_the_probe_scenes_not_the_ones_that_chose_th
               "kept_tree": tree_to_json(start), "kept_score": chosen_on(start),
               "polished_tree": tree_to_json(other), "polished_score": chosen_on(other)}
     assert judge_trees("highway", result) and not judge_trees("highway", result)  # once
-    probe = {t: evaluate_batched("highway", tree_batch_act_fn("highway", t), PROBE_EPISODES, EVAL_SEED).mean_return
+    probe = {t: evaluate_batched("highway", tree_batch_act_fn("highway", t), probe_episodes("highway"), EVAL_SEED).mean_return
              for t in (start, other)}
     assert result["kept_judged"] == result["initial_tree_judged"] == probe[start]
     assert result["polished_judged"] == probe[other] and result["kept_judged"] != result["kept_score"]

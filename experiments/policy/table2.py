@@ -40,7 +40,14 @@ from nl2policy.domains import get_domain
 
 LABEL = {"tree_ddt": "tree-initialized DDT", "random_ddt": "random DDT (8 leaves)", "mlp": "MLP (3 layers)"}
 CHECKPOINTS = 20  # probes per run: the resolution of "steps to 90 %" on the handed-back policy
-PROBE_EPISODES = 500  # fast-sim scenes per probe where there is no exact model (common to all runs)
+
+
+def probe_episodes(domain: str) -> int:
+    """Fast-sim scenes per probe where there is no exact model (common to all runs): the knobs'
+    ``select_episodes``, the count keep-best already trusts (highway 500 twin scenes; lunar 100
+    Box2D scenes, whose hovering episodes run 1,000 steps)."""
+    return int(get_domain(domain).knobs.select_episodes or 0)
+
 REACH = 0.9  # the issue's sample-efficiency level: steps until 90 % of the way from the floor to the ceiling
 
 
@@ -72,8 +79,14 @@ def select_trees(domain: str, candidates: int, best: int, episodes: int, seed: i
     if path.is_file():
         return json.loads(path.read_text())["selected"]
     vocab, exact = get_domain(domain).vocab, get_domain(domain).exact
+    policies = distinct_policies(domain)[:candidates]
+    if not policies:  # nobody has described this domain: its spec's example tree, a tree a person would write
+        example = get_domain(domain).example_tree
+        if example is None:
+            raise ValueError(f"{domain} has no corpus and no example_tree in its spec: Table 2 has no start tree")
+        policies = [(tree_to_json(example), 0)]
     ranked = []
-    for tree_json, count in distinct_policies(domain)[:candidates]:
+    for tree_json, count in policies:
         tree = parse_tree(tree_json, vocab)
         if get_domain(domain).train_env_id is not None:
             ev = evaluate_batched(domain, tree_batch_act_fn(domain, tree), episodes, seed)
@@ -99,7 +112,7 @@ def table_yardsticks(domain: str, root: Path) -> dict:
     Ceiling: with an exact model (taxi), the best stationary policy on the features, exactly
     (the issue's bar for the MLP's plateau; the optimum sees the tick, which no method sees);
     else (highway), the best distinct corpus policy. Floor: the uniform random policy. Both are
-    scored as the probes score (exact, or on the probe's ``PROBE_EPISODES`` fast-sim scenes
+    scored as the probes score (exact, or on the probe's ``probe_episodes`` fast-sim scenes
     from ``EVAL_SEED``), so every number compares. Scores in Table 2 are normalized between
     them (0 = random, 1 = ceiling), as RL benchmarks normalize: on highway the state-blind
     "always slower" already reaches 93 % of the best corpus tree's raw return, so raw
@@ -119,16 +132,22 @@ def table_yardsticks(domain: str, root: Path) -> dict:
         constant = [float(d.exact.expected_return(lambda x, a=a: a)) for a in range(n)]
     else:
         trees = [parse_tree(t, d.vocab) for t, _ in distinct_policies(domain)]
-        means = []
-        for k in range(0, len(trees), 8):  # 8 x 500 scenes a batch keeps memory small
-            batch = [tree_batch_act_fn(domain, t) for t in trees[k:k + 8]]
-            means += [e.mean_return for e in evaluate_batched_many(domain, batch, PROBE_EPISODES, EVAL_SEED)]
-        best = int(np.argmax(means))
-        ceiling = {"value": float(means[best]), "tree": tree_to_json(trees[best]),
-                   "what": f"the best of {len(trees)} distinct corpus policies"}
+        if trees:
+            means = []
+            for k in range(0, len(trees), 8):  # 8 x 500 scenes a batch keeps memory small
+                batch = [tree_batch_act_fn(domain, t) for t in trees[k:k + 8]]
+                means += [e.mean_return for e in evaluate_batched_many(domain, batch, probe_episodes(domain), EVAL_SEED)]
+            best = int(np.argmax(means))
+            ceiling = {"value": float(means[best]), "tree": tree_to_json(trees[best]),
+                       "what": f"the best of {len(trees)} distinct corpus policies"}
+        elif d.reference is not None:  # nobody has described the domain: its hand-written reference policy
+            ceiling = {"value": evaluate_batched(domain, reference_batch_act(domain), probe_episodes(domain), EVAL_SEED).mean_return,
+                       "what": f"the domain's reference policy ({d.reference})"}
+        else:
+            raise ValueError(f"{domain} has neither a corpus nor a reference policy: Table 2 has no ceiling")
         rng = np.random.default_rng(EVAL_SEED)
         acts = [lambda x, a=a: np.full(len(x), a) for a in range(n)] + [lambda x: rng.integers(n, size=len(x))]
-        *constant, floor = [e.mean_return for e in evaluate_batched_many(domain, acts, PROBE_EPISODES, EVAL_SEED)]
+        *constant, floor = [e.mean_return for e in evaluate_batched_many(domain, acts, probe_episodes(domain), EVAL_SEED)]
     k = int(np.argmax(constant))
     entry = {"ceiling": ceiling, "floor": {"value": floor, "what": "uniform random actions"},
              "constant": {"value": constant[k], "what": f"always {d.actions[k]} (the best state-blind policy)"},
@@ -138,10 +157,16 @@ def table_yardsticks(domain: str, root: Path) -> dict:
     return entry
 
 
+def reference_batch_act(domain: str) -> Callable:
+    """The domain's reference policy (spec ``reference``, one observation -> an action) on a batch."""
+    act = get_domain(domain).attribute(get_domain(domain).reference)
+    return lambda X: np.array([int(act(x)) for x in X], dtype=np.int64)
+
+
 def probe_rule(domain: str) -> str:
     """How ``policy_probe`` and ``table_yardsticks`` score a policy, in words."""
     d = get_domain(domain)
-    return "exact" if d.exact is not None else f"{PROBE_EPISODES} {d.train_env_id} episodes from seed {EVAL_SEED}"
+    return "exact" if d.exact is not None else f"{probe_episodes(domain)} {d.train_env_id} episodes from seed {EVAL_SEED}"
 
 
 def normalized(value: float, yardsticks: dict) -> float:
@@ -154,7 +179,7 @@ def policy_probe(domain: str, method: str) -> Optional[Callable]:
     """What Table 2 measures at every checkpoint: the return of the policy the method hands
     back (a DDT method: its discretized tree; the MLP: its greedy actions) and of the soft
     policy PPO trains (sampled actions). Exact where the domain has an exact model; else on
-    ``PROBE_EPISODES`` fast-sim scenes from ``EVAL_SEED``, common to every run and checkpoint.
+    ``probe_episodes`` fast-sim scenes from ``EVAL_SEED``, common to every run and checkpoint.
     None for a domain with neither."""
     d = get_domain(domain)
 
@@ -182,7 +207,7 @@ def policy_probe(domain: str, method: str) -> Optional[Callable]:
             p = probs(x)
             return np.minimum((p.cumsum(axis=1) < rng.random((len(p), 1))).sum(axis=1), p.shape[1] - 1)
 
-        policy, soft = evaluate_batched_many(domain, [greedy, sampled], PROBE_EPISODES, EVAL_SEED)
+        policy, soft = evaluate_batched_many(domain, [greedy, sampled], probe_episodes(domain), EVAL_SEED)
         return {"policy": policy.mean_return, "soft": soft.mean_return}
 
     return sampled_probe
@@ -255,7 +280,7 @@ def judge_trees(domain: str, result: dict) -> bool:
     if not todo:
         return False
     acts = [tree_batch_act_fn(domain, tree_from_json(t)) for _, t in todo]
-    for (key, _), ev in zip(todo, evaluate_batched_many(domain, acts, PROBE_EPISODES, EVAL_SEED)):
+    for (key, _), ev in zip(todo, evaluate_batched_many(domain, acts, probe_episodes(domain), EVAL_SEED)):
         result[key] = ev.mean_return
     result["judged_by"] = probe_rule(domain)
     return True

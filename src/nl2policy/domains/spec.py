@@ -25,7 +25,7 @@ from typing import Any, Callable, Mapping, Optional, Protocol, Sequence
 
 import numpy as np
 
-from nl2policy.trees import Leaf, Tree, Vocabulary
+from nl2policy.trees import Leaf, Tree, TreeError, Vocabulary, parse_tree
 
 
 @dataclass(frozen=True)
@@ -102,6 +102,8 @@ class Domain:
     ranges: tuple[tuple[float, float], ...] = ()  # per feature, the box uniform_states spreads over (default [0, 1])
     title: str = ""  # how people see the domain named (the app's domain menu)
     example: str = ""  # the description `nl2policy run` translates when given none
+    example_tree: Optional[Tree] = None  # the tree `example` says: a test checks the shipped translator reads it so,
+    # and a domain no one has described starts Table 2's tree-DDT runs from it (a tree a person would write)
     briefing_section: Optional[str] = None  # the corpus briefing's "## <section>" about this domain
     ceilings: Optional[str] = None  # a module in the folder with compute_ceilings / write_ceilings (nl2policy ceilings)
     reference: Optional[str] = None  # "module:function" in the folder: a hand-written policy of features to actions, a yardstick
@@ -259,10 +261,17 @@ def load_domain(folder: Path, package: str, spec: Optional[dict] = None) -> Doma
     if ranges and set(ranges) != set(features):
         raise ValueError(f"{where}: [ranges] must give every feature a [low, high] and name no other")
     env_id, train_env_id = env_ids(name, spec)
+    knobs = _knobs(spec, where)
+    example_tree = None
+    if "example_tree" in spec:
+        try:
+            example_tree = parse_tree(spec["example_tree"], vocab)
+        except TreeError as exc:
+            raise ValueError(f"{where}: example_tree: {exc}") from None
     return Domain(name, folder, package, vocab, tuple(features), weights, thresholds, impossible, env_id,
-                  _knobs(spec, where), exact_model=spec.get("exact_model"), one_hot=one_hot,
+                  knobs, exact_model=spec.get("exact_model"), one_hot=one_hot,
                   train_env_id=train_env_id, title=spec.get("title", name.capitalize()),
-                  example=spec.get("example", ""), briefing_section=spec.get("briefing_section"),
+                  example=spec.get("example", ""), example_tree=example_tree, briefing_section=spec.get("briefing_section"),
                   ceilings=spec.get("ceilings"), reference=spec.get("reference"),
                   translator=dict(spec.get("translator", {})),
                   ranges=tuple((float(ranges[f][0]), float(ranges[f][1])) for f in features) if ranges else ())

@@ -10,7 +10,7 @@ no one here has seen. Each pair is a pure function of its seed.
 from __future__ import annotations
 
 import random
-from typing import Callable, Sequence
+from typing import Callable, Collection, Sequence
 
 from nl2policy.domains import get_domain
 from nl2policy.language.synthetic.prose import sentence
@@ -24,16 +24,21 @@ PERSONAS = (("plain", 0.5), ("formal", 0.15), ("speech", 0.15), ("texting", 0.15
 """Who is writing: how the words are typed and how much is said around the policy."""
 
 
-def describe(tree: Tree, domain: str, rng: random.Random, style: str | None = None, typo_rate: float = 0.2) -> str:
+def describe(tree: Tree, domain: str, rng: random.Random, style: str | None = None, typo_rate: float = 0.2,
+             styles: Collection[str] | None = None) -> str:
     """One synthetic description of `tree`: a style (STYLES, drawn by STYLE_WEIGHTS unless
     given), in a persona's register, with what people say around a policy; typos in a
-    `typo_rate` share of descriptions."""
+    `typo_rate` share of descriptions. `styles`: the only styles it may use, anywhere (also in
+    a closing summary), so an evaluation can hold whole styles out."""
     names, weights = zip(*PERSONAS)
     persona = rng.choices(names, weights)[0]
     w = Words(domain, rng, formal=persona == "formal")
     w.correct = 0.15 if persona == "speech" else 0.0
+    allowed = [name for name in STYLE_WEIGHTS if styles is None or name in styles]
+    if not allowed:
+        raise ValueError(f"no style left to draw from: {sorted(styles or ())}")
     if style is None:
-        style = rng.choices(list(STYLE_WEIGHTS), list(STYLE_WEIGHTS.values()))[0]
+        style = rng.choices(allowed, [STYLE_WEIGHTS[name] for name in allowed])[0]
     text = STYLES[style](tree, w)
     en = english()
     before, after = [], []
@@ -44,8 +49,9 @@ def describe(tree: Tree, domain: str, rng: random.Random, style: str | None = No
         (before if w.chance(0.5) else after).append(sentence(w.pick(en["chatter"])))
     if w.chance(0.3 if persona != "long" else 0.9):
         (after if w.chance(0.7) else before).extend(asides(tree, w))
-    if w.chance(0.12 if persona != "long" else 0.7):
-        after.append(w.en("summary") + w.pick([arrows, rules])(tree, w))
+    summaries = [f for f in (arrows, rules) if f.__name__ in allowed]
+    if w.chance(0.12 if persona != "long" else 0.7) and summaries:
+        after.append(w.en("summary") + w.pick(summaries)(tree, w))
     if w.chance(0.25):
         after.append(sentence(w.en("outros")))
     sep = "\n" if style in STRUCTURED or "\n" in text else " "
@@ -61,7 +67,8 @@ def describe(tree: Tree, domain: str, rng: random.Random, style: str | None = No
 
 
 def synthetic_pairs(domain: str, n_random: int, seed: int = 0, extra_trees: Sequence[Tree] = (),
-                    per_tree: int = 1, exclude: Callable[[Tree], bool] = lambda tree: False) -> list[tuple[str, Tree]]:
+                    per_tree: int = 1, exclude: Callable[[Tree], bool] = lambda tree: False,
+                    styles: Collection[str] | None = None) -> list[tuple[str, Tree]]:
     """`n_random` random trees plus `per_tree` fresh descriptions of each tree in `extra_trees`
     (pass training-fold trees only). A random tree for which `exclude` is true is drawn again: an
     evaluation that holds trees out passes them here, so no synthetic pair teaches a test tree."""
@@ -73,7 +80,7 @@ def synthetic_pairs(domain: str, n_random: int, seed: int = 0, extra_trees: Sequ
         if not exclude(tree):
             trees.append(tree)
     trees += [t for t in extra_trees for _ in range(per_tree)]
-    return [(describe(t, domain, rng), t) for t in trees]
+    return [(describe(t, domain, rng, styles=styles), t) for t in trees]
 
 
 __all__ = ["STYLES", "code_names", "describe", "random_tree", "synthetic_pairs"]

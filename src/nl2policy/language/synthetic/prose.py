@@ -136,7 +136,8 @@ def except_when(w: Words, q: str, y: Told, n: Told, depth: int) -> str:
 def postfix(w: Words, q: str, y: Told, n: Told, depth: int) -> str:
     """Both actions with their conditions after them: "y if A, and x if not"."""
     form = w.pick(["{y} if {p}, and {n} if not", "{y} if {p}; {n} otherwise", "{y} when {p}, {n} when {np}",
-                   "{y} if {p}, else {n}", "{y} as long as {p}; if not, {n}"])
+                   "{y} if {p}, else {n}", "{y} as long as {p}; if not, {n}", "{y} when {p}, and {n} when not",
+                   "{y} when {p}, and {n} when it is not"])
     return sentence(form.format(y=y[1], n=n[1], p=w.pos(q), np=w.neg(q)))
 
 
