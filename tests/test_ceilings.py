@@ -14,7 +14,7 @@ from nl2policy.domains.taxi.tables import effective_action, taxi_tables
 from nl2policy.language.corpus import distinct_trees
 from nl2policy.policy.rollout import tree_policy
 from nl2policy.domains.taxi.ceilings import TreeMaps, best_stationary_policy, best_tree, options
-from nl2policy.trees import Leaf, Node
+from nl2policy.trees import Leaf, Node, parse_tree
 from nl2policy.trees.tree import depth
 
 pytestmark = pytest.mark.slow
@@ -99,11 +99,36 @@ def test_full_ceilings_are_ordered(tables):
     assert stationary.value <= optimal_policy(TaxiModel())[0] + 1e-12
 
 
-def test_ceilings_cli_refuses_a_domain_without_a_ceiling_search(tmp_path):
-    result = CliRunner().invoke(app, ["ceilings", "--domain", "highway", "--out", str(tmp_path)])
+def test_sampled_ceilings_refuse_a_depth_the_climb_cannot_keep(tmp_path):
+    """highway has no exact search: its ceiling is the sampled climb, which keeps the grid's depth."""
+    result = CliRunner().invoke(app, ["ceilings", "--domain", "highway", "--max-depth", "2", "--out", str(tmp_path)])
     assert result.exit_code == 2
-    assert result.output.strip().splitlines() == ["error: highway has no ceiling search (its spec.toml names no `ceilings` module)"]
+    assert result.output.strip().splitlines() == ["error: a sampled ceiling climbs trees of the grid's depth (3) only"]
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+def test_sampled_ceiling_climbs_from_every_start_and_reports_fresh_scenes(tmp_path):
+    """Every state-blind tree and the example's tree is a start; the ceiling is the best by the
+    confirmation scenes, its fresh score is rollout's on EVAL_SEED, and no climb ends worse than
+    its start on the confirmation scenes."""
+    from nl2policy.domains import get_domain
+    from nl2policy.policy.ceiling_climb import compute_ceilings, write_ceilings
+    from nl2policy.policy.convert import tree_batch_act_fn
+    from nl2policy.policy.optimize import EVAL_SEED
+    from nl2policy.policy.rollout import evaluate_batched
+
+    d = get_domain("highway")
+    result = compute_ceilings("highway", screen_episodes=4, select_episodes=24, eval_episodes=16)
+    climbs = result["climbs"]
+    assert [c["start_name"] for c in climbs] == [f"always {a}" for a in d.actions] + ["the example's tree"]
+    assert all(c["selection"] >= c["start_selection"] for c in climbs)
+    assert result["best"] == max(range(len(climbs)), key=lambda k: climbs[k]["selection"])
+    best = climbs[result["best"]]
+    fresh = evaluate_batched("highway", tree_batch_act_fn("highway", parse_tree(best["tree"], d.vocab)), 16, EVAL_SEED)
+    assert best["fresh"]["mean"] == pytest.approx(fresh.mean_return)
+    md = write_ceilings(result, tmp_path, "test")
+    assert "**(ceiling)**" in md.read_text() and (tmp_path / "ceilings_highway.json").exists()
 
 
 def test_stochastic_policies_are_scored_exactly(tables):

@@ -224,3 +224,29 @@ def test_lunar_vector_env_shows_repeated_policies_the_same_scenes():
     with pytest.raises(ValueError, match="repeat"):
         env.reset(seed=0, options={"repeat": 4})
     env.close()
+
+
+def test_lunar_batched_evaluation_counts_first_episodes_as_single_episodes_do():
+    """The reset option once leaves finished episodes unstepped (a screen lasts as long as its
+    longest episode, not 1,000 steps each): the batched returns are exactly rollout.evaluate's,
+    episode by episode, and a finished env stays finished with zero reward."""
+    import gymnasium as gym
+
+    from nl2policy.policy.rollout import evaluate, evaluate_batched_many
+
+    rng = np.random.default_rng(0)
+    falls, random_act = (lambda x: 0), (lambda x: int(rng.integers(4)))
+    batched = evaluate_batched_many("lunar", [lambda x: np.zeros(len(x), dtype=int)] * 2, 3, 11)
+    single = evaluate("lunar", falls, 3, 11)
+    assert batched[0].returns == batched[1].returns == pytest.approx(single.returns, abs=1e-9)
+    env = gym.make_vec(get_domain("lunar").train_env_id, num_envs=2, vectorization_mode="vector_entry_point")
+    env.reset(seed=3, options={"once": True})
+    ended = np.zeros(2, dtype=bool)
+    for _ in range(1_000):
+        _, reward, terminated, truncated, _ = env.step(np.array([random_act(None), 0]))
+        assert np.all(reward[ended] == 0.0) and np.all((terminated | truncated)[ended])
+        ended |= terminated | truncated
+        if ended.all():
+            break
+    assert ended.all()
+    env.close()

@@ -339,13 +339,18 @@ def summarize(results: list[dict], domain: str, yardsticks: dict, level: float =
             entry["soft_minus_discrete"] = {**_stats([r["soft_minus_discrete"] for r in rows]),
                                             "values": [r["soft_minus_discrete"] for r in rows]}
         judged = any("judged_by" in r for r in rows)  # run_one judges every finished DDT run of a sampled domain
-        name = (lambda key: JUDGED[key]) if judged else (lambda key: key)  # the probe's scenes where the domain samples
+        name = (lambda key: JUDGED.get(key, key)) if judged else (lambda key: key)  # the probe's scenes where the domain samples
         for key in ("kept_score", "polished_score"):
             if all(name(key) in r for r in rows):
                 entry[key] = _stats([r[name(key)] for r in rows])
+        if all(name("kept_score") in r for r in rows):  # what optimize hands back: the better of kept and polished
+            for r in rows:
+                polished = "polished_score" in r and r["polished_score"] > r["kept_score"]
+                r["returned_score"] = r[name("polished_score" if polished else "kept_score")]
+            entry["returned_score"] = _stats([r["returned_score"] for r in rows])
         if all(name("initial_tree_score") in r for r in rows):
             entry["initial_tree_score"] = _stats([r[name("initial_tree_score")] for r in rows])
-            for key in ("kept_score", "polished_score"):
+            for key in ("kept_score", "polished_score", "returned_score"):
                 if key in entry:
                     gain = np.array([r[name(key)] - r[name("initial_tree_score")] for r in rows])
                     entry[f"{key}_gain"] = {"median": float(np.median(gain)), "improved": int((gain > 1e-9).sum()),

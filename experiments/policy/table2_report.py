@@ -51,8 +51,8 @@ def write_table(domain: str, table: dict, results: list[dict], settings: dict, o
     lines = [f"# Table 2 ({domain}): PPO from a tree-initialized DDT vs baselines", "",
              f"Made by: `{command}`  ", f"On: {meta['made']}  ", f"Settings: {json.dumps(settings)}", "",
              f"| method | runs | initial | best | steps to {pct}: rolling | steps to {pct}: handed back | "
-             "handed back, last | kept tree | + polish | soft - discrete |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "handed back, last | kept tree | + polish | returned | soft - discrete |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for method in METHODS:
         if method not in table:
             continue
@@ -60,10 +60,11 @@ def write_table(domain: str, table: dict, results: list[dict], settings: dict, o
         lines.append(f"| {LABEL[method]} | {e['runs']} | {_cell(e['initial'], y)} | {_cell(e['best'], y)} | "
                      f"{_reach_cell(e['steps_to_reach_rolling'])} | {_reach_cell(e.get('steps_to_reach_policy'))} | "
                      f"{_cell(e.get('last_policy'), y)} | {_cell(e.get('kept_score'), y)} | "
-                     f"{_cell(e.get('polished_score'), y)} | {_gap_cell(e.get('soft_minus_discrete'))} |")
+                     f"{_cell(e.get('polished_score'), y)} | {_cell(e.get('returned_score'), y)} | "
+                     f"{_gap_cell(e.get('soft_minus_discrete'))} |")
     for key in ("ceiling", "constant", "floor"):
         lines.append(f"| *{y[key]['what']}* | | | | | | {y[key]['value']:.3f} ({100 * normalized(y[key]['value'], y):.0f}%)"
-                     " | | | |")
+                     " | | | | |")
     tree_rows = table.get("tree_ddt", {})
     lines += ["", f"Cells: median ± standard error across runs; in brackets, the normalized score: 0% = uniform random "
                   "actions, 100% = the ceiling (the italic rows, scored "
@@ -74,13 +75,16 @@ def write_table(domain: str, table: dict, results: list[dict], settings: dict, o
                   f"normalized {pct} (a return of {table['reach_return']:.3f}); the median counts a run that never "
                   "does as infinitely slow (in brackets: runs that did). Handed back, last: that policy at the end of "
                   "training; kept tree: the best of the start tree and every checkpoint's discretized tree; + polish: "
-                  "the local search from the kept tree (`optimize` returns the better of the two). Soft - discrete: "
+                  "the local search from the kept tree (\"-\" unless every run's kept tree could be polished: a kept tree "
+                  "with raw threshold tests cannot); returned: what `optimize` hands back, the better of the two by "
+                  "the scores it chose them on. Soft - discrete: "
                   "the soft policy PPO trained minus the policy handed back, at the end. Start, kept and polished "
                   "trees are scored "
                   + (f"on the probe's scenes ({y['scored_by']}), not on those keep-best and the polish chose them on "
                      f"({_chosen_on(results)}; `table2_{domain}_runs.md` has both)." if _judged(results) else
                      f"as `optimize` scores them: {_chosen_on(results)}.")]
-    for key, what in (("kept_score_gain", "kept tree"), ("polished_score_gain", "polished tree")):
+    for key, what in (("kept_score_gain", "kept tree"), ("polished_score_gain", "polished tree"),
+                      ("returned_score_gain", "returned tree")):
         gain = tree_rows.get(key)
         if gain:
             lines.append(f"\nTree-DDT runs, {what} minus start tree: median {gain['median']:+.3f}; better in "

@@ -63,17 +63,21 @@ def optimize(
 
 
 def ceilings(
-    domain: str = typer.Option(..., help="A domain whose folder has a ceiling search (taxi)"),
+    domain: str = typer.Option(..., help="A domain whose folder has an exact ceiling search (taxi), or a fast simulator to climb on"),
     max_depth: int = typer.Option(3, min=1, max=3, help="Deepest dictionary trees to search (the grid allows 3)"),
     out: Path = typer.Option(Path("results/policy"), help="Folder for ceilings_<domain>.md / .json"),
 ) -> None:
-    """The domain's yardsticks by exact search: optimum, best stationary feature policy, best trees."""
+    """The domain's yardsticks: by exact search where its folder has one (optimum, best stationary
+    feature policy, best trees), else a lower bound by the sampled climb from several starts."""
     from nl2policy.console import console, domain_or_fail, fail, out_dir_or_fail, progress_bar
 
+    from nl2policy.policy import ceiling_climb
+    from nl2policy.policy.polish import can_polish
+
     d = domain_or_fail(domain)
-    if d.ceilings is None:
-        fail(f"{domain} has no ceiling search (its spec.toml names no `ceilings` module)")
-    search = d.module(d.ceilings)
+    if d.ceilings is None and (d.exact is not None or not can_polish(domain)):
+        fail(f"{domain} has no ceiling search (its spec.toml names no `ceilings` module) and no fast simulator to climb on")
+    search = d.module(d.ceilings) if d.ceilings is not None else ceiling_climb
     out_dir_or_fail(out)
     command = f"nl2policy ceilings --domain {domain} --max-depth {max_depth} --out {out}"
     with progress_bar() as bar:

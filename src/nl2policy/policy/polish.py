@@ -26,10 +26,17 @@ reported beside PPO's tree, never instead of it (``optimize_tree`` writes both).
 A domain without an exact model but with a fast vector env (highway's twin) gets
 ``polish_sampled``: the same single edits, scored on sampled episodes, where a climb on noise is
 the danger. Every candidate meets the same scenes (common random numbers); a round screens all
-neighbours on the knobs' ``polish_screen_episodes`` (seed ``POLISH_SEED``), then confirms the
-best few on keep-best's ``select_episodes`` (seed ``SELECT_SEED``), and moves only where the
-per-episode gain over the incumbent is ``CONFIRM_Z`` paired standard errors above zero. Neither
-seed is ``optimize``'s reporting seed, so a reported gain is not the selection's own noise.
+neighbours on the knobs' ``polish_screen_episodes`` (seed ``POLISH_SEED``), screens the best
+``RESCREEN_BEST`` again on ``RESCREEN_FACTOR`` times as many, then confirms the best few on
+keep-best's ``select_episodes`` (seed ``SELECT_SEED``): the polish accepts a tree only where its
+per-episode gain over the last accepted tree is ``CONFIRM_Z`` paired standard errors above zero.
+Where no neighbour confirms, the climb may still take the best screened move and look on from
+there, up to ``MAX_AHEAD`` unconfirmed moves past the last accepted tree; a tree found there is
+accepted only by the same confirmation against the last accepted one, so the whole path is judged
+at once. Single edits of a lunar tree rarely change its return by more than the noise, and good
+trees are several edits away (the example tree: no single edit confirmed; see lunar's knobs).
+Neither seed is ``optimize``'s reporting seed, so a reported gain is not the selection's own
+noise.
 """
 
 from __future__ import annotations
@@ -50,6 +57,9 @@ MIN_GAIN = 1e-9  # a move must beat the current return by more than float noise
 POLISH_SEED = 70_000  # the sampled polish's screening scenes: apart from EVAL_SEED and SELECT_SEED
 CONFIRM_Z = 2.0  # a sampled move's paired gain must be this many standard errors above zero
 CONFIRM_BEST = 3  # screened candidates confirmed per round, best first
+RESCREEN_BEST = 16  # neighbours screened a second time, on more scenes, before any confirmation
+RESCREEN_FACTOR = 4  # the second screen's scenes, in multiples of the first's
+MAX_AHEAD = 3  # unconfirmed moves the sampled climb may take past the last accepted tree
 
 
 @dataclass
@@ -156,10 +166,11 @@ def polish_sampled(domain: str, tree: Tree, screen_episodes: Optional[int] = Non
                    confirm_episodes: Optional[int] = None) -> Polished:
     """Best-improvement hill climbing from `tree` on the domain's fast vector env, without an
     exact model (module doc). ``value`` and ``start_value`` are mean returns over the
-    ``select_episodes`` confirmation episodes; the start is kept unless a neighbour beats it by
+    ``select_episodes`` confirmation episodes; the start is kept unless a tree beats it by
     ``CONFIRM_Z`` paired standard errors there. Its scenes are fixed, so the result is a function
     of the tree: cached per process (another seed of the same start often keeps the same tree),
-    with the first call's seconds. The episode counts default to the knobs'."""
+    with the first call's seconds. ``rounds`` counts accepted trees. The episode counts default
+    to the knobs'."""
     import numpy as np
 
     from nl2policy.policy.convert import tree_batch_act_fn
@@ -179,28 +190,49 @@ def polish_sampled(domain: str, tree: Tree, screen_episodes: Optional[int] = Non
     def returns(t: Tree, n: int, seed: int) -> np.ndarray:
         return np.asarray(evaluate_batched(domain, tree_batch_act_fn(domain, t), n, seed).returns)
 
-    incumbent = returns(tree, confirm_n, SELECT_SEED)
-    start_value, scored, rounds = float(incumbent.mean()), 0, 0
-    while rounds < MAX_ROUNDS:
-        candidates = neighbours(domain, tree)
-        screened = evaluate_batched_many(domain, [tree_batch_act_fn(domain, t) for t in [tree] + candidates],
-                                         screen_n, POLISH_SEED)
-        base = np.asarray(screened[0].returns)
-        gains = [float((np.asarray(e.returns) - base).mean()) for e in screened[1:]]
+    def screen(at: Tree, candidates: list[Tree], n: int) -> list[float]:
+        """Mean gain of each candidate over `at` on n common screening scenes."""
+        runs = evaluate_batched_many(domain, [tree_batch_act_fn(domain, t) for t in [at] + candidates], n, POLISH_SEED)
+        base = np.asarray(runs[0].returns)
+        return [float((np.asarray(r.returns) - base).mean()) for r in runs[1:]]
+
+    def key(t: Tree) -> str:
+        return json.dumps(tree_to_json(t), sort_keys=True)
+
+    accepted, incumbent = tree, returns(tree, confirm_n, SELECT_SEED)
+    start_value, scored, rounds, steps = float(incumbent.mean()), 0, 0, 0
+    current, ahead, visited = tree, 0, {key(tree)}
+    while steps < MAX_ROUNDS:
+        steps += 1
+        candidates = [c for c in neighbours(domain, current) if key(c) not in visited]
+        if not candidates:
+            break
+        gains = screen(current, candidates, screen_n)
         scored += len(candidates)
+        best = sorted(range(len(candidates)), key=lambda i: -gains[i])[:RESCREEN_BEST]
+        best = [i for i in best if gains[i] > MIN_GAIN]
+        if not best:
+            break
+        regains = screen(current, [candidates[i] for i in best], screen_n * RESCREEN_FACTOR)
+        ranked = [(candidates[i], g) for g, i in sorted(zip(regains, best), key=lambda p: -p[0]) if g > MIN_GAIN]
+        if not ranked:
+            break
         found = None
-        for k in sorted(range(len(candidates)), key=lambda i: -gains[i])[:CONFIRM_BEST]:
-            if gains[k] <= MIN_GAIN:
-                break
-            confirmed = returns(candidates[k], confirm_n, SELECT_SEED)
+        for candidate, _ in ranked[:CONFIRM_BEST]:
+            confirmed = returns(candidate, confirm_n, SELECT_SEED)
             diff = confirmed - incumbent
             if diff.mean() > CONFIRM_Z * diff.std(ddof=1) / np.sqrt(len(diff)):
-                found = (candidates[k], confirmed)
+                found = (candidate, confirmed)
                 break
-        if found is None:
+        if found is not None:
+            (accepted, incumbent), rounds, ahead = found, rounds + 1, 0
+            current = accepted
+        elif ahead < MAX_AHEAD:
+            current, ahead = ranked[0][0], ahead + 1
+        else:
             break
-        (tree, incumbent), rounds = found, rounds + 1
-    return Polished(tree, float(incumbent.mean()), start_value, rounds, scored, time.perf_counter() - start)
+        visited.add(key(current))
+    return Polished(accepted, float(incumbent.mean()), start_value, rounds, scored, time.perf_counter() - start)
 
 
 def can_polish(domain: str) -> bool:

@@ -93,7 +93,8 @@ def evaluate_batched_many(domain: str, acts: list[BatchActFn], episodes: int, se
 
     k, n = len(acts), len(acts) * episodes
     env = gym.make_vec(d.train_env_id, num_envs=n, vectorization_mode="vector_entry_point")
-    obs, _ = env.reset(seed=seed, options={"repeat": k} if k > 1 else None)
+    # once: an env that can leave a finished episode unstepped may (only first episodes count)
+    obs, _ = env.reset(seed=seed, options={"repeat": k, "once": True})
     totals, running = np.zeros(n), np.ones(n, dtype=bool)
     while running.any():
         actions = np.concatenate([np.asarray(act(obs[j * episodes:(j + 1) * episodes]), dtype=np.int64)
