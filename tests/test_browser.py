@@ -223,7 +223,7 @@ def test_optimize_page_lists_runs_live_and_cancels(server, browser):
     page.on("dialog", lambda dialog: dialog.accept())
     page.click("#delete")
     page.wait_for_selector(f"#runs li[data-run='{long['id']}']", state="detached", timeout=10_000)
-    assert page.locator("#run-card").is_hidden()
+    page.wait_for_selector("#run-card", state="hidden", timeout=10_000)
     page.close()
 
 
