@@ -13,8 +13,8 @@ from typer.testing import CliRunner
 from nl2policy.app.server import create_app
 from nl2policy.cli import app as cli
 from nl2policy.domains import get_domain
-from nl2policy.language.clarify import (Answer, BadAnswer, NoTreeFits, agrees, parse_answers, situation_text,
-                                        situations)
+from nl2policy.language.clarify import (Answer, BadAnswer, NoTreeFits, agrees, best_question, parse_answers,
+                                        situation_text, situations)
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.translate import get_model, translate, translate_with
 from nl2policy.trees.parse import validate
@@ -63,6 +63,43 @@ def test_every_question_is_about_an_allowed_situation_and_every_tree_agrees_with
             assert agrees(result.tree, answers)
             asked_some += 1
     assert asked_some >= 3
+
+
+def test_an_answer_that_confirms_the_tree_leaves_it_as_it_is():
+    """Answering each question with what the shown tree already does there never redraws it."""
+    loaded = get_model("taxi")
+    confirmed = 0
+    for spec in load_corpus("taxi", rounds=(2,))[:12]:
+        result = translate_with(loaded, "taxi", spec.description)
+        shown, answers = result.tree, []
+        while result.questions:
+            q = result.questions[0]
+            answers.append(Answer(q.situation, shown.act(dict(q.situation))))
+            result = translate_with(loaded, "taxi", spec.description, answers)
+            assert result.tree == shown
+            confirmed += 1
+    assert confirmed >= 3
+
+
+def test_the_question_asked_is_where_the_plausible_trees_disagree_most():
+    """Three candidates: one tree (weight 0.5) and two that differ from it in different
+    situations (0.3 in the city with a passenger, 0.2 at the airport): the city splits the
+    weight 0.7 / 0.3 (1 - 0.49 - 0.09 = 0.42), the airport 0.8 / 0.2 (0.32), so the city is asked
+    first, then the airport, then nothing once both are answered."""
+    from math import log
+    from nl2policy.trees.tokens import from_tokens
+    vocab = get_domain("taxi").vocab
+    shown = from_tokens("at_city go_airport go_city".split(), vocab)
+    city = from_tokens("at_city has_passenger go_village go_airport go_city".split(), vocab)
+    airport = from_tokens("at_airport wait at_city go_airport go_city".split(), vocab)
+    hyps = [(shown, {}, log(0.5)), (city, {}, log(0.3)), (airport, {}, log(0.2))]
+    first = dict(best_question("taxi", hyps, []))
+    assert first["at_city"] and first["has_passenger"]
+    done = [Answer(s, shown.act(dict(s))) for s in situations("taxi") if dict(s)["at_city"] and dict(s)["has_passenger"]]
+    second = dict(best_question("taxi", hyps, done))
+    assert second["at_airport"]
+    done += [Answer(s, shown.act(dict(s))) for s in situations("taxi") if dict(s)["at_airport"]]
+    assert best_question("taxi", hyps, done) is None
 
 
 def test_a_confident_translation_asks_nothing():

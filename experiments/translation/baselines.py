@@ -101,7 +101,7 @@ BASELINES: dict[str, ModelConfig] = {
     # the default's four networks (member m: seed s + m, its own draw of augmented and synthetic
     # pairs), step probabilities averaged, a beam of 4: the default without its learned findings.
     # The variants that lost were deleted with their code; their folds stay in
-    # results/translation/runs.jsonl and history.md
+    # results/translation/history/runs.jsonl and history.md
     "seq2tree-minilm-synth-x4": ModelConfig("flat", "tree", True, 200, minilm_layers=6, ensemble=4,
                                             member_draws=True, beam=4),
 }

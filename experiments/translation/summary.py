@@ -5,10 +5,10 @@ A row is a model; a column is a protocol, so every model's leave-writers-out and
 accuracy sits beside its cross-validation. Below it: token accuracy, the decoding choices each
 measured against the same networks decoded without them, and the confidence's reliability. A fold
 recorded twice counts once. The long history of variants that lost stays in
-results/translation/history.md, made by the code of its day.
+results/translation/history/history.md, made by the code of its day.
 
-    .venv/bin/python -m experiments.translation.summary --runs results/translation/v2/runs.jsonl \
-        --runs results/translation/runs.jsonl --out results/translation/table1.md
+    .venv/bin/python -m experiments.translation.summary --runs results/translation/history/v2/runs.jsonl \
+        --runs results/translation/history/runs.jsonl --out results/translation/table1.md
 """
 
 from __future__ import annotations

@@ -4,10 +4,11 @@ A person who describes a policy may not be able to check a nested tree, but alwa
 the robot should do in one situation. So where the translation is unsure, the translator asks
 about the situation whose answer is expected to remove the most of its doubt: among the trees
 the model finds plausible (a wide grammar-constrained beam, each tree weighed by its score), the
-situation where they disagree most (1 - sum of squared action shares). Each answer is then a
-constraint of decoding itself (`allow_for`): no tree that acts otherwise in that situation is
-ever built, so every tree returned after an answer acts as answered, and trees outside the first
-beam can come back.
+situation where they disagree most (1 - sum of squared action shares). Answers that agree
+with the tree first shown leave it as it is (a confirmed tree is no reason to redraw it);
+otherwise the tree is decoded anew with every answer a constraint of decoding itself
+(`allow_for`): no tree that acts otherwise in an answered situation is ever built, so every tree
+returned after an answer acts as answered, and trees outside the first beam can come back.
 
 A situation names an answer to every question of the domain's dictionary, and only
 combinations the domain allows (one taxi location; no free lane beyond the edge of the road):
@@ -173,6 +174,12 @@ def weights(hypotheses: Sequence[Hypothesis]) -> list[float]:
     raw = [math.exp(h[2] - top) for h in hypotheses]
     total = sum(raw)
     return [r / total for r in raw]
+
+
+def weight_of(tree: Tree, hypotheses: Sequence[Hypothesis]) -> Optional[float]:
+    """`tree`'s share of the beam's weight, or None where the beam does not hold it."""
+    shares = [w for h, w in zip(hypotheses, weights(hypotheses)) if h[0] == tree]
+    return sum(shares) if shares else None
 
 
 def best_question(domain: str, hypotheses: Sequence[Hypothesis], answered: Sequence[Answer]) -> Optional[Situation]:

@@ -58,7 +58,7 @@ class FindingsNet(nn.Module):
     Labels: each question ("does the tree ask it?"), each action ("does a leaf take it?"), and
     the root, a choice among every question and action (a one-leaf tree's root is its action).
     (Rules as labels, (question, answer, action) for every leaf and condition on its path, were
-    tried on one leave-trees-out fold and decoded worse at every weight: results/translation/findings/.)"""
+    tried on one leave-trees-out fold and decoded worse at every weight: results/translation/history/findings/.)"""
 
     def __init__(self, n_questions: int, n_actions: int, cfg: FindingsConfig = FindingsConfig()) -> None:
         super().__init__()

@@ -23,7 +23,8 @@ import torch
 
 from nl2policy.domains import get_domain
 from nl2policy.language.clarify import (ASK_BELOW, CANDIDATES, MAX_QUESTIONS, Answer, BadAnswer, NoTreeFits, Question,
-                                        allow_for, best_question, parse_answers, question_for)
+                                        agrees, allow_for, best_question, parse_answers, question_for,
+                                        weight_of)
 from nl2policy.language.findings import Findings, FindingsModel, root_label
 from nl2policy.language.models.config import DEFAULT_MODEL, ModelConfig
 from nl2policy.language.models.pretrained import MiniLMCache
@@ -206,21 +207,24 @@ def _step(loaded: LoadedModel, domain: str, text: str, found: Optional[list[Find
           factor: float, max_questions: int) -> tuple[Tree, dict[int, float], float, Optional[Question]]:
     """The tree, its node probabilities, its confidence and the next question, given answers.
     Without answers this is the plain translation (the model's beam; confidence = the tree's
-    probability). With answers the tree is the best of a wide beam held to them, and its
-    confidence is its share of that beam's weight: how sure the model is of it once they hold."""
+    probability). With answers, the plain translation stands while it acts as every answer says
+    (an answer that confirms the tree is no reason to redraw it); otherwise the tree is the best of
+    a wide beam held to the answers. Its confidence is then its share of that beam's weight: how
+    sure the model is of it once the answers hold."""
     model, own = loaded.translator, found[0] if found else None
-    allow = allow_for(domain, answers)
-    candidates = None
-    if not answers:
-        tree, node_probs = model.predict([text], found=found)[0]
-        confidence = tree_probability(node_probs) * factor
-    else:
-        candidates = model.hypotheses(text, own, allow, width=CANDIDATES)
-        tree, node_probs, _ = candidates[0]
-        if tree is None:
+    first, first_probs = model.predict([text], found=found)[0]
+    tree, node_probs, candidates = first, first_probs, None
+    confidence = tree_probability(first_probs) * factor
+    if answers:
+        candidates = model.hypotheses(text, own, allow_for(domain, answers), width=CANDIDATES)
+        if candidates[0][0] is None:
             raise NoTreeFits("no tree of at most 3 questions on a path acts as all the answers say; "
                              "check the answers, or edit the tree by hand")
-        confidence = _share(candidates) * factor
+        if not agrees(first, answers):
+            tree, node_probs, _ = candidates[0]
+        held = weight_of(tree, candidates)
+        if held is not None:  # else the plain translation fell off the wide beam: its own probability stays
+            confidence = held * factor
     question = None
     # the first question only where the (calibrated) confidence is low; once the user is being
     # asked, until the plausible trees agree in every situation or the questions are spent: the
@@ -231,12 +235,6 @@ def _step(loaded: LoadedModel, domain: str, text: str, found: Optional[list[Find
         situation = best_question(domain, candidates, answers)
         question = question_for(domain, situation) if situation is not None else None
     return tree, node_probs, max(0.0, min(1.0, confidence)), question
-
-
-def _share(hypotheses: list) -> float:
-    """The first hypothesis's share of the beam's weight (scores are log-probabilities)."""
-    top = hypotheses[0][2]
-    return 1.0 / sum(math.exp(h[2] - top) for h in hypotheses)
 
 
 def disagreements(domain: str, tree: Tree, found: Findings) -> list[str]:
