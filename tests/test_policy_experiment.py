@@ -58,6 +58,15 @@ def test_tiny_experiment_writes_table_and_skips_finished_runs(tmp_path):
     assert runner.invoke(app, args).exit_code == 0  # second time: every run already finished
     assert run.stat().st_mtime_ns == before
     assert json.loads((tmp_path / "table2_taxi.json").read_text())["table"] == table["table"]
+    # VIPER's teacher is the MLP run of the same seed trained again: the same network, so the same return
+    viper = runner.invoke(app, ["viper", "--domain", "taxi", "--seeds", "1", "--rounds", "1", "--steps-per-round", "256",
+                                "--out", str(tmp_path)])
+    assert viper.exit_code == 0, viper.output
+    distilled = json.loads((tmp_path / "taxi" / "viper" / "viper_s0" / "result.json").read_text())
+    assert distilled["teacher_steps"] == runs["mlp"]["steps"]
+    assert distilled["teacher_judged"] == runs["mlp"]["probes"][-1]["policy"]
+    assert runner.invoke(app, args).exit_code == 0
+    assert "VIPER" in (tmp_path / "table2_taxi.md").read_text()
 
 
 def test_sampled_probe_scores_the_start_tree_on_the_probe_scenes():

@@ -1,6 +1,7 @@
-"""The policy lab: the paper's Table 2, the DDT fidelity table and the corpus trees' returns.
+"""The policy lab: the paper's Table 2 (with VIPER's row), the DDT fidelity table and the corpus trees' returns.
 
     .venv/bin/python -m experiments.policy table2 --domain taxi --steps 300000 --tree-seeds 1 --baseline-seeds 5
+    .venv/bin/python -m experiments.policy viper --domain highway --seeds 5 --out results/policy
     .venv/bin/python -m experiments.policy fidelity --states 10000 --out results/policy
     .venv/bin/python -m experiments.policy corpus-returns --domain taxi --out results/foundation
 
@@ -22,7 +23,7 @@ from nl2policy.domains import DOMAINS
 from nl2policy.limits import MAX_CLI_STEPS, MAX_COUNT, MAX_EPISODES
 
 app = typer.Typer(cls=CommandGroup, add_completion=False, no_args_is_help=True,
-                  help="The policy lab: Table 2, the fidelity table, the corpus trees' returns.")
+                  help="The policy lab: Table 2, VIPER, the fidelity table, the corpus trees' returns.")
 
 
 @app.command()
@@ -92,6 +93,44 @@ def table2(
                 raise
             fail(reason)
     console.print((out / f"table2_{domain}.md").read_text())
+
+
+@app.command()
+def viper(
+    domain: str = typer.Option(..., help=f"One of: {', '.join(DOMAINS)}"),
+    seeds: int = typer.Option(5, min=1, max=MAX_COUNT, help="Seeds 0..N-1: each trains its teacher as Table 2's MLP run of that seed"),
+    steps: Optional[int] = typer.Option(None, min=1, max=MAX_CLI_STEPS,
+                                        help="The teacher's PPO steps (default: the steps of the committed Table 2)"),
+    rounds: int = typer.Option(8, min=1, max=MAX_COUNT, help="DAgger rounds"),
+    steps_per_round: int = typer.Option(20_000, min=1, max=MAX_CLI_STEPS, help="Env steps of states collected a round"),
+    out: Path = typer.Option(Path("results/policy")),
+) -> None:
+    """VIPER: a dictionary tree distilled from Table 2's MLP with DAgger (resumable), beside Table 2."""
+    import json
+
+    import torch
+
+    from experiments.policy.viper import run_viper, write_viper_table
+    from nl2policy.console import console, domain_or_fail, fail, progress_bar
+
+    torch.set_num_threads(1)
+    domain_or_fail(domain)
+    if steps is None:
+        table = out / f"table2_{domain}.json"
+        if not table.is_file():
+            fail(f"no {table} to take the MLP's steps from: give --steps")
+        steps = int(json.loads(table.read_text())["settings"]["steps_per_run"])
+    command = (f"python -m experiments.policy viper --domain {domain} --seeds {seeds} --steps {steps} --rounds {rounds} "
+               f"--steps-per-round {steps_per_round} --out {out}")
+    results = []
+    with progress_bar() as bar:
+        task = bar.add_task(f"{domain}: VIPER seeds", total=seeds)
+        for seed in range(seeds):
+            results.append(run_viper(domain, seed, steps, out / domain / "viper" / f"viper_s{seed}", rounds, steps_per_round,
+                                     progress=lambda msg, s=seed: bar.console.print(f"seed {s}: {msg}", highlight=False)))
+            bar.update(task, completed=seed + 1)
+            write_viper_table(domain, results, out, command)
+    console.print((out / f"viper_{domain}.md").read_text())
 
 
 @app.command()

@@ -214,8 +214,10 @@ def policy_probe(domain: str, method: str) -> Optional[Callable]:
 
 
 def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree_json: Optional[dict],
-            progress: Optional[Callable[[int, int], None]] = None, polish: bool = True) -> dict:
-    """One run of the grid: PPO for `steps`, then the records Table 2 reads (result.json)."""
+            progress: Optional[Callable[[int, int], None]] = None, polish: bool = True,
+            save_model: Optional[Path] = None) -> dict:
+    """One run of the grid: PPO for `steps`, then the records Table 2 reads (result.json).
+    `save_model`: also save the trained network there (VIPER's teacher), before result.json."""
     result_path = run_dir / "result.json"
     if result_path.is_file():
         result = json.loads(result_path.read_text())
@@ -243,7 +245,8 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
     if method != "mlp":  # what a user gets back: PPO's last tree, the kept tree, the polished one
         last = ddt_to_tree(domain, actor_ddt(model))
         result.update({"last_tree": tree_to_json(last), "last_tree_has_raw_tests": has_raw_tests(last),
-                       "kept_tree": best["tree"], "kept_score": best["score"], "kept_step": best["step"]})
+                       "kept_tree": best["tree"], "kept_score": best["score"], "kept_step": best["step"],
+                       "kept_read": best.get("read", "rounded")})
         if tree is not None:
             result["initial_tree_score"] = scorer(tree)
         kept = tree_from_json(best["tree"])
@@ -253,6 +256,8 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
                            "polish_seconds": polished.seconds})
         result["scored_by"] = rule
         judge_trees(domain, result)
+    if save_model is not None:
+        model.save(save_model)
     result_path.write_text(json.dumps(result))
     (run_dir / "checkpoint.zip").unlink(missing_ok=True)  # finished: result.json is the record
     return result

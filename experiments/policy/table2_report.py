@@ -62,6 +62,13 @@ def write_table(domain: str, table: dict, results: list[dict], settings: dict, o
                      f"{_cell(e.get('last_policy'), y)} | {_cell(e.get('kept_score'), y)} | "
                      f"{_cell(e.get('polished_score'), y)} | {_cell(e.get('returned_score'), y)} | "
                      f"{_gap_cell(e.get('soft_minus_discrete'))} |")
+    viper = viper_results(out, domain)
+    if viper:  # the distillation baseline (viper.py): its tree is what it returns
+        v = np.array([r["judged"] for r in viper], dtype=float)
+        stats = {"median": float(np.median(v)), "stderr": float(v.std(ddof=1) / np.sqrt(len(v))) if len(v) > 1 else 0.0}
+        table["viper"] = {"runs": len(viper), "returned_score": stats}
+        lines.append(f"| VIPER: a tree distilled from the MLP (`viper_{domain}.md`) | {len(viper)} | | | | | | | | "
+                     f"{_cell(stats, y)} | |")
     for key in ("ceiling", "constant", "floor"):
         lines.append(f"| *{y[key]['what']}* | | | | | | {y[key]['value']:.3f} ({100 * normalized(y[key]['value'], y):.0f}%)"
                      " | | | | |")
@@ -83,6 +90,11 @@ def write_table(domain: str, table: dict, results: list[dict], settings: dict, o
                   + (f"on the probe's scenes ({y['scored_by']}), not on those keep-best and the polish chose them on "
                      f"({_chosen_on(results)}; `table2_{domain}_runs.md` has both)." if _judged(results) else
                      f"as `optimize` scores them: {_chosen_on(results)}.")]
+    if viper:
+        lines.append(f"\nVIPER (Bastani et al., NeurIPS 2018): each seed's MLP run trained again as the teacher, then a "
+                     "dictionary tree of at most 3 questions on a path fitted to its greedy actions over DAgger rounds "
+                     "and scored on the probe like every tree; its command, rounds and trees: "
+                     f"`viper_{domain}.md`.")
     for key, what in (("kept_score_gain", "kept tree"), ("polished_score_gain", "polished tree"),
                       ("returned_score_gain", "returned tree")):
         gain = tree_rows.get(key)
@@ -103,6 +115,12 @@ def write_table(domain: str, table: dict, results: list[dict], settings: dict, o
     (out / f"table2_{domain}.json").write_text(json.dumps({"meta": meta, "settings": settings, "table": table,
                                                            "runs": slim}, indent=2))
     return md
+
+
+def viper_results(out: Path, domain: str) -> list[dict]:
+    """The finished VIPER runs beside this Table 2 (`python -m experiments.policy viper`), by seed."""
+    paths = sorted((out / domain / "viper").glob("viper_s*/result.json"), key=lambda p: int(p.parent.name[7:]))
+    return [json.loads(p.read_text()) for p in paths]
 
 
 def _versus(a: dict, b: dict) -> str:

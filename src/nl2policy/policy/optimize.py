@@ -5,8 +5,11 @@ the SB3 model, the step count and the episode curve so far, repeat. A killed run
 again with the same ``out`` folder loads the checkpoint and continues from the saved step.
 
 What ``optimize_tree`` returns (``final_tree.json``) is never worse than the tree it was
-given: the best of the initial tree and every checkpoint's discretized tree (``keep_best``),
-then, with ``polish``, a hill climb over questions and actions from it (``polish``: on the
+given: the best of the initial tree and every checkpoint's tree (``keep_best``), where a
+checkpoint's tree is the better of two readings of the trained DDT: its rounding and its
+distillation, the dictionary tree that acts most like it in the states PPO visited lately
+(``distill``; measured on highway, a start at 17.82 whose rounded trees never beat it came back at
+19.53 read by distillation: results/policy/history/distilled_reading_probe.md), then, with ``polish``, a hill climb over questions and actions from it (``polish``: on the
 exact model where the domain has one, else on common sampled scenes of its fast simulator). PPO's own last tree (``last_tree.json``), the kept tree (``best_tree.json``) and
 the polished one (``polished_tree.json``) are written and scored beside it, so the paper's
 DDT + PPO and each added step are reported separately.
@@ -23,10 +26,11 @@ from typing import Callable, NamedTuple, Optional
 import numpy as np
 import torch
 from stable_baselines3 import PPO
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from nl2policy.domains import get_domain
 from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn
+from nl2policy.policy.distill import VisitedStates, distilled_tree
 from nl2policy.policy.keep_best import keep_best, tree_scorer
 from nl2policy.policy.rollout import evaluate, tree_policy
 from nl2policy.policy.sb3_policy import TreePPO, action_probs_fn, actor_ddt, make_ppo, make_vec_env, soft_act_fn
@@ -68,24 +72,38 @@ class EpisodeLog(BaseCallback):
         return True
 
 
-def checkpoint_tree_score(domain: str, sampled: bool = False,
-                          scorer: Optional[Callable[[Tree], float]] = None) -> Optional[Callable[[PPO], tuple[dict, float]]]:
-    """How to score the discretized tree at each checkpoint (``keep_best.tree_scorer``), or None.
+TreeScore = Callable[[PPO, Optional[np.ndarray]], tuple[dict, float, str]]
+"""(model, states it visited lately or None) -> (the tree it hands back as JSON, that tree's
+score, how the tree was read from the model: "rounded" or "distilled")."""
 
-    With an exact model (taxi): the exact expected return of the discretized tree (~0.1 s, no
-    sampling noise). PPO's discretized tree wanders between checkpoints (measured:
-    results/policy/tuning_taxi.md), so the run also keeps the best tree it passed through,
-    the way one keeps the best checkpoint on a validation score. Without one (highway),
-    sampled episodes cost seconds each: only where `sampled` asks for it (``optimize`` does,
-    to return a tree never worse than its start; the Table 2 grid does not). `scorer`: one
-    already made, to share its cache of sampled scores."""
+
+def checkpoint_tree_score(domain: str, sampled: bool = False,
+                          scorer: Optional[Callable[[Tree], float]] = None) -> Optional[TreeScore]:
+    """How to read and score the tree of the policy at each checkpoint (``keep_best.tree_scorer``),
+    or None.
+
+    Two readings of the trained DDT compete: its rounding (``ddt_to_tree``: each node's strongest
+    feature, each leaf's likeliest action) and, given the states PPO visited lately, its
+    distillation (``distill.distilled_tree``: the dictionary tree acting most like it there). The
+    better by `scorer` is the checkpoint's tree (a tie keeps the rounding).
+
+    With an exact model (taxi): the exact expected return (~0.1 s, no sampling noise). PPO's tree
+    wanders between checkpoints (measured: results/policy/tuning_taxi.md), so the run also keeps
+    the best tree it passed through, the way one keeps the best checkpoint on a validation score.
+    Without one (highway), sampled episodes cost seconds each: only where `sampled` asks for it
+    (``optimize`` does, to return a tree never worse than its start; the Table 2 grid does too).
+    `scorer`: one already made, to share its cache of sampled scores."""
     if get_domain(domain).exact is None and not sampled:
         return None
     scorer = scorer or tree_scorer(domain)[0]
 
-    def score(model: PPO) -> tuple[dict, float]:
-        tree = ddt_to_tree(domain, actor_ddt(model))
-        return tree_to_json(tree), scorer(tree)
+    def score(model: PPO, states: Optional[np.ndarray] = None) -> tuple[dict, float, str]:
+        readings = [("rounded", ddt_to_tree(domain, actor_ddt(model)))]
+        if states is not None and len(states):
+            readings.append(("distilled", distilled_tree(domain, action_probs_fn(model), states)))
+        scored = [(scorer(tree), i, read, tree) for i, (read, tree) in enumerate(readings)]
+        value, _, read, tree = max(scored, key=lambda t: (t[0], -t[1]))
+        return tree_to_json(tree), value, read
 
     return score
 
@@ -96,20 +114,21 @@ class Trained(NamedTuple):
     model: PPO
     episodes: list  # [(step, episode return)] of the training episodes, all sessions
     seconds: float  # training seconds, all sessions
-    best: Optional[dict]  # the best checkpoint tree {"step", "tree", "score"}; None without score_tree
+    best: Optional[dict]  # the best checkpoint tree {"step", "tree", "score", "read"}; None without score_tree
     probes: list  # [{"step", **probe(model)}] at step 0 and after every chunk; [] without probe
 
 
 def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int, steps: int, run_dir: Path,
                        progress: Progress = None,
-                       score_tree: Optional[Callable[[PPO], tuple[dict, float]]] = None,
+                       score_tree: Optional[TreeScore] = None,
                        simulator: str = "fast", probe: Optional[Callable[[PPO], dict]] = None,
                        checkpoints: int = 10) -> Trained:
     """Train to `steps` env steps in about `checkpoints` chunks, checkpointing into `run_dir`
     after each; resumes a saved run.
 
-    With `score_tree`, the discretized tree is scored after every chunk and the best one kept
-    (``{"step", "tree", "score"}``; the initial actor's tree counts as step 0). With `probe`,
+    With `score_tree`, the model's tree (read from the states PPO visited in its latest rollouts,
+    ``distill.VisitedStates``) is scored after every chunk and the best one kept
+    (``{"step", "tree", "score", "read"}``; the initial actor's tree counts as step 0). With `probe`,
     its measurements of the model (Table 2: the exact return of the policy a method hands
     back) are recorded at step 0 and after every chunk, so a curve of them survives resumes."""
     # PPO here runs batch-of-one forward passes through tiny nets: extra intra-op threads only
@@ -131,29 +150,30 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
         episodes, seconds, chunks = [tuple(e) for e in state["episodes"]], state["seconds"], state["chunks"]
         best, probes = state.get("best_tree"), state.get("probes", [])
         if best is None and score_tree is not None:  # a checkpoint from before its run tracked trees
-            tree_json, score = score_tree(model)
-            best = {"step": int(model.num_timesteps), "tree": tree_json, "score": score}
+            tree_json, score, read = score_tree(model, None)
+            best = {"step": int(model.num_timesteps), "tree": tree_json, "score": score, "read": read}
     else:
         model, episodes, seconds, chunks = model_factory(), [], 0.0, 0
         best, probes = None, []
         if score_tree is not None:
-            tree_json, score = score_tree(model)
-            best = {"step": 0, "tree": tree_json, "score": score}
+            tree_json, score, read = score_tree(model, None)
+            best = {"step": 0, "tree": tree_json, "score": score, "read": read}
         if probe is not None:
             probes.append({"step": 0, **probe(model)})
     rollout = model.n_steps * model.n_envs
     chunk = rollout * max(1, steps // (checkpoints * rollout))
     total = -(-steps // rollout) * rollout  # PPO trains whole rollouts
-    log = EpisodeLog(episodes, total, progress)
+    log, visited = EpisodeLog(episodes, total, progress), VisitedStates()
     while model.num_timesteps < steps:
         start = time.perf_counter()
-        model.learn(min(chunk, steps - model.num_timesteps), callback=log, reset_num_timesteps=False)
+        model.learn(min(chunk, steps - model.num_timesteps), callback=CallbackList([log, visited]),
+                    reset_num_timesteps=False)
         seconds += time.perf_counter() - start
         chunks += 1
         if score_tree is not None:
-            tree_json, score = score_tree(model)
+            tree_json, score, read = score_tree(model, visited.states())
             if score > best["score"]:
-                best = {"step": int(model.num_timesteps), "tree": tree_json, "score": score}
+                best = {"step": int(model.num_timesteps), "tree": tree_json, "score": score, "read": read}
         if probe is not None:
             probes.append({"step": int(model.num_timesteps), **probe(model)})
         _write_atomically(ckpt_path, model.save)
@@ -258,7 +278,8 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
         "first_rolling_return": float(rolling[min(window, len(rolling)) - 1]) if len(rolling) else None,
         "last_rolling_return": float(rolling[-1]) if len(rolling) else None,
         "keep_best": {"scored_by": rule, "initial_score": initial_score, "best_checkpoint_score": best["score"],
-                      "best_checkpoint_step": best["step"], "kept": kept_from, "kept_score": kept_score,
+                      "best_checkpoint_step": best["step"], "best_checkpoint_read": best.get("read", "rounded"),
+                      "kept": kept_from, "kept_score": kept_score,
                       "seconds": round(select_seconds, 2)},
     }
     # PPO's own discretization loss: its last discretized tree against the soft DDT it came from
