@@ -33,7 +33,7 @@ from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn, tr
 from nl2policy.policy.keep_best import tree_from_json, tree_scorer
 from nl2policy.policy.optimize import EVAL_SEED, checkpoint_tree_score, rolling_mean, train_checkpointed, write_curve
 from nl2policy.policy.polish import can_polish, polish_any
-from nl2policy.policy.rollout import evaluate, evaluate_batched, evaluate_batched_many, tree_policy
+from nl2policy.policy.rollout import evaluate, evaluate_batched, evaluate_batched_many, reference_batch_act, tree_policy
 from nl2policy.policy.sb3_policy import METHODS, action_probs_fn, actor_ddt, make_ppo, soft_act_fn
 from nl2policy.trees import parse_tree, tree_to_json
 from nl2policy.domains import get_domain
@@ -155,12 +155,6 @@ def table_yardsticks(domain: str, root: Path) -> dict:
     root.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(entry, indent=2))
     return entry
-
-
-def reference_batch_act(domain: str) -> Callable:
-    """The domain's reference policy (spec ``reference``, one observation -> an action) on a batch."""
-    act = get_domain(domain).attribute(get_domain(domain).reference)
-    return lambda X: np.array([int(act(x)) for x in X], dtype=np.int64)
 
 
 def probe_rule(domain: str) -> str:

@@ -9,7 +9,7 @@ from typing import Optional
 
 import numpy as np
 
-from experiments.policy.table2 import JUDGED, LABEL, normalized
+from experiments.policy.table2 import JUDGED, LABEL, _stats, normalized
 from nl2policy.policy.sb3_policy import METHODS
 from nl2policy.report import provenance
 
@@ -64,8 +64,7 @@ def write_table(domain: str, table: dict, results: list[dict], settings: dict, o
                      f"{_gap_cell(e.get('soft_minus_discrete'))} |")
     viper = viper_results(out, domain)
     if viper:  # the distillation baseline (viper.py): its tree is what it returns
-        v = np.array([r["judged"] for r in viper], dtype=float)
-        stats = {"median": float(np.median(v)), "stderr": float(v.std(ddof=1) / np.sqrt(len(v))) if len(v) > 1 else 0.0}
+        stats = _stats([r["judged"] for r in viper])
         table["viper"] = {"runs": len(viper), "returned_score": stats}
         lines.append(f"| VIPER: a tree distilled from the MLP (`viper_{domain}.md`) | {len(viper)} | | | | | | | | "
                      f"{_cell(stats, y)} | |")

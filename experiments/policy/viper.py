@@ -128,24 +128,28 @@ def run_viper(domain: str, seed: int, steps: int, run_dir: Path, rounds: int = R
     return result
 
 
-def _stats(values: list[float]) -> str:
-    v = np.asarray(values, dtype=float)
-    se = float(v.std(ddof=1) / np.sqrt(len(v))) if len(v) > 1 else 0.0
-    return f"{float(np.median(v)):.3f} ± {se:.3f}"
+def _median_se(values: list[float]) -> str:
+    from experiments.policy.table2 import _stats
+
+    s = _stats(values)
+    return f"{s['median']:.3f} ± {s['stderr']:.3f}"
 
 
 def write_viper_table(domain: str, results: list[dict], out: Path, command: str) -> Path:
     """`viper_<domain>.md` / `.json`: the distilled tree per seed and its median beside its
     teacher, and beside the committed Table 2's MLP and tree-DDT rows where it exists."""
     lines = [f"# VIPER on {domain}: a dictionary tree distilled from the MLP\n", f"Made by: `{command}`  ",
-             f"Scored by: {results[0]['judged_by']} (Table 2's probe); each round's tree chosen by {results[0]['scored_by']}.\n",
-             "| seed | teacher (MLP, greedy) | VIPER tree | chosen round | states | agreement with the teacher, last round | tree |",
+             f"Scored by: {results[0]['judged_by']} (Table 2's probe); each round's tree chosen by "
+             f"{results[0]['scored_by']}.\n",
+             "| seed | teacher (MLP, greedy) | VIPER tree | chosen round | states | "
+             "agreement with the teacher, last round | tree |",
              "|---:|---:|---:|---:|---:|---:|---|"]
     for r in results:
         lines.append(f"| {r['seed']} | {r['teacher_judged']:.3f} | {r['judged']:.3f} | {r['round']} | {r['states']} | "
                      f"{r['rounds'][-1]['agreement']:.3f} | `{json.dumps(r['tree'])}` |")
-    lines += ["", f"Median ± standard error over {len(results)} seeds: teacher {_stats([r['teacher_judged'] for r in results])}, "
-              f"VIPER tree {_stats([r['judged'] for r in results])}."]
+    lines += ["", f"Median ± standard error over {len(results)} seeds: "
+              f"teacher {_median_se([r['teacher_judged'] for r in results])}, "
+              f"VIPER tree {_median_se([r['judged'] for r in results])}."]
     table2 = out / f"table2_{domain}.json"
     if table2.is_file():
         t = json.loads(table2.read_text())["table"]
@@ -156,7 +160,7 @@ def write_viper_table(domain: str, results: list[dict], out: Path, command: str)
                  {"median": t["yardsticks"]["ceiling"]["value"], "stderr": 0.0})]
         lines += ["", "Beside the committed Table 2 (`" + table2.name + "`), the same probe:", "",
                   "| policy | median ± se |", "|---|---:|",
-                  f"| VIPER tree (this table) | {_stats([r['judged'] for r in results])} |"]
+                  f"| VIPER tree (this table) | {_median_se([r['judged'] for r in results])} |"]
         lines += [f"| {name} | {s['median']:.3f} ± {s['stderr']:.3f} |" for name, s in rows if s]
     (out / f"viper_{domain}.md").write_text("\n".join(lines) + "\n")
     (out / f"viper_{domain}.json").write_text(json.dumps({"command": command, "runs": results}, indent=1) + "\n")

@@ -188,13 +188,14 @@ def translate_with(loaded: LoadedModel, domain: str, text: str, answers: Sequenc
     asked them itself, like the simulated user, may skip it)."""
     found = loaded.translator.read_findings([text])  # read once: decoding weighs it, the warnings quote it
     factor, warnings = check_topic(domain, text, loaded.lexicon) if loaded.lexicon else (1.0, [])
+    plain = loaded.translator.predict([text], found=found)[0]  # the same for every step of the replay
     if check_asked:
         for i, answer in enumerate(answers):
-            asked = _step(loaded, domain, text, found, answers[:i], factor, max_questions)[3]
+            asked = _step(loaded, domain, text, found, plain, answers[:i], factor, max_questions)[3]
             if asked is None or asked.situation != answer.situation:
                 raise BadAnswer(f"answer {i + 1} is about a situation that was not asked "
                                 + ("(nothing was asked there)" if asked is None else f"(the question was: {asked.text})"))
-    tree, node_probs, confidence, question = _step(loaded, domain, text, found, answers, factor, max_questions)
+    tree, node_probs, confidence, question = _step(loaded, domain, text, found, plain, answers, factor, max_questions)
     if confidence < LOW_CONFIDENCE:
         warnings.append(f"low confidence ({confidence:.2f}): check the tree before using it")
     if found is not None and factor == 1.0:  # off-topic text: its findings mean nothing
@@ -203,16 +204,17 @@ def translate_with(loaded: LoadedModel, domain: str, text: str, answers: Sequenc
                        [question] if question else [])
 
 
-def _step(loaded: LoadedModel, domain: str, text: str, found: Optional[list[Findings]], answers: Sequence[Answer],
-          factor: float, max_questions: int) -> tuple[Tree, dict[int, float], float, Optional[Question]]:
+def _step(loaded: LoadedModel, domain: str, text: str, found: Optional[list[Findings]],
+          plain: tuple[Tree, dict[int, float]], answers: Sequence[Answer], factor: float,
+          max_questions: int) -> tuple[Tree, dict[int, float], float, Optional[Question]]:
     """The tree, its node probabilities, its confidence and the next question, given answers.
-    Without answers this is the plain translation (the model's beam; confidence = the tree's
-    probability). With answers, the plain translation stands while it acts as every answer says
+    Without answers this is the plain translation (`plain`: the model's beam; confidence = the
+    tree's probability). With answers, the plain translation stands while it acts as every answer says
     (an answer that confirms the tree is no reason to redraw it); otherwise the tree is the best of
     a wide beam held to the answers. Its confidence is then its share of that beam's weight: how
     sure the model is of it once the answers hold."""
     model, own = loaded.translator, found[0] if found else None
-    first, first_probs = model.predict([text], found=found)[0]
+    first, first_probs = plain
     tree, node_probs, candidates = first, first_probs, None
     confidence = tree_probability(first_probs) * factor
     if answers:

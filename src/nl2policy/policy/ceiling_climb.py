@@ -44,7 +44,7 @@ def compute_ceilings(domain: str, max_depth: int = MAX_DEPTH,
     from nl2policy.policy.convert import tree_batch_act_fn
     from nl2policy.policy.optimize import EVAL_SEED
     from nl2policy.policy.polish import polish_sampled
-    from nl2policy.policy.rollout import evaluate_batched
+    from nl2policy.policy.rollout import evaluate_batched, reference_batch_act
 
     d = get_domain(domain)
     if max_depth != MAX_DEPTH:
@@ -54,10 +54,10 @@ def compute_ceilings(domain: str, max_depth: int = MAX_DEPTH,
     episodes = int(eval_episodes or d.knobs.select_episodes)
     screen_n = screen_episodes or d.knobs.polish_screen_episodes
     select_n = select_episodes or d.knobs.select_episodes
-    climbs, began = [], time.perf_counter()
-    for i, (name, start) in enumerate(starts(domain)):
+    climbs, began, todo = [], time.perf_counter(), starts(domain)
+    for i, (name, start) in enumerate(todo):
         if progress:
-            progress(f"{domain}: climbing from {name} ({i + 1}/{len(starts(domain))})")
+            progress(f"{domain}: climbing from {name} ({i + 1}/{len(todo)})")
         polished = polish_sampled(domain, start, screen_n, select_n)
         fresh = {}
         for key, tree in (("start", start), ("climbed", polished.tree)):
@@ -70,17 +70,11 @@ def compute_ceilings(domain: str, max_depth: int = MAX_DEPTH,
     best = max(range(len(climbs)), key=lambda k: climbs[k]["selection"])
     reference = None
     if d.reference is not None:
-        e = evaluate_batched(domain, _batch(d.attribute(d.reference)), episodes, EVAL_SEED)
+        e = evaluate_batched(domain, reference_batch_act(domain), episodes, EVAL_SEED)
         reference = {"name": d.reference, "mean": e.mean_return, "stderr": e.stderr}
     return {"domain": domain, "max_depth": max_depth, "climbs": climbs, "best": best, "reference": reference,
             "eval_episodes": episodes, "eval_seed": EVAL_SEED, "screen_episodes": screen_n,
             "select_episodes": select_n, "seconds": time.perf_counter() - began}
-
-
-def _batch(act: Callable) -> Callable:
-    import numpy as np
-
-    return lambda obs: np.array([int(act(o)) for o in obs], dtype=np.int64)
 
 
 def write_ceilings(result: dict, out: Path, command: str) -> Path:

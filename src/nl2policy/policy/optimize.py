@@ -8,11 +8,13 @@ What ``optimize_tree`` returns (``final_tree.json``) is never worse than the tre
 given: the best of the initial tree and every checkpoint's tree (``keep_best``), where a
 checkpoint's tree is the better of two readings of the trained DDT: its rounding and its
 distillation, the dictionary tree that acts most like it in the states PPO visited lately
-(``distill``; measured on highway, a start at 17.82 whose rounded trees never beat it came back at
-19.53 read by distillation: results/policy/history/distilled_reading_probe.md), then, with ``polish``, a hill climb over questions and actions from it (``polish``: on the
-exact model where the domain has one, else on common sampled scenes of its fast simulator). PPO's own last tree (``last_tree.json``), the kept tree (``best_tree.json``) and
-the polished one (``polished_tree.json``) are written and scored beside it, so the paper's
-DDT + PPO and each added step are reported separately.
+(``distill``; measured on highway, a start at 17.82 whose rounded trees never beat it came back
+at 19.53 read by distillation: results/policy/history/distilled_reading_probe.md), then, with
+``polish``, a hill climb over questions and actions from it (``polish``: on the exact model
+where the domain has one, else on common sampled scenes of its fast simulator). PPO's own last
+tree (``last_tree.json``), the kept tree (``best_tree.json``) and the polished one
+(``polished_tree.json``) are written and scored beside it, so the paper's DDT + PPO and each
+added step are reported separately.
 """
 
 from __future__ import annotations
@@ -98,11 +100,13 @@ def checkpoint_tree_score(domain: str, sampled: bool = False,
     scorer = scorer or tree_scorer(domain)[0]
 
     def score(model: PPO, states: Optional[np.ndarray] = None) -> tuple[dict, float, str]:
-        readings = [("rounded", ddt_to_tree(domain, actor_ddt(model)))]
+        tree, read = ddt_to_tree(domain, actor_ddt(model)), "rounded"
+        value = scorer(tree)
         if states is not None and len(states):
-            readings.append(("distilled", distilled_tree(domain, action_probs_fn(model), states)))
-        scored = [(scorer(tree), i, read, tree) for i, (read, tree) in enumerate(readings)]
-        value, _, read, tree = max(scored, key=lambda t: (t[0], -t[1]))
+            distilled = distilled_tree(domain, action_probs_fn(model), states)
+            distilled_value = scorer(distilled)
+            if distilled_value > value:
+                tree, value, read = distilled, distilled_value, "distilled"
         return tree_to_json(tree), value, read
 
     return score

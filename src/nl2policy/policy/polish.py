@@ -41,7 +41,6 @@ noise.
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass
 from functools import lru_cache
@@ -49,7 +48,7 @@ from typing import Iterator, Optional
 
 from nl2policy.domains import get_domain
 from nl2policy.policy.convert import has_raw_tests, tree_act_fn
-from nl2policy.trees import MAX_DEPTH, Leaf, Node, Tree, TreeError, tree_to_json
+from nl2policy.trees import MAX_DEPTH, Leaf, Node, Tree, TreeError
 from nl2policy.trees.parse import validate
 
 MAX_ROUNDS = 50  # each round strictly improves; taxi polishes stop within a handful
@@ -95,13 +94,12 @@ def _edits(tree: Tree, questions: list[str], actions: list[str], level: int = 0)
 def neighbours(domain: str, tree: Tree) -> list[Tree]:
     """The distinct valid trees one edit from `tree`."""
     d = get_domain(domain)
-    seen, out = {json.dumps(tree_to_json(tree), sort_keys=True)}, []
+    seen, out = {tree}, []  # trees are frozen dataclasses: equal trees hash alike
     for candidate in _edits(tree, d.questions, d.actions):
         candidate = _normalize(candidate)
-        key = json.dumps(tree_to_json(candidate), sort_keys=True)
-        if key in seen:
+        if candidate in seen:
             continue
-        seen.add(key)
+        seen.add(candidate)
         try:
             out.append(validate(candidate, d.vocab))
         except TreeError:
@@ -196,15 +194,12 @@ def polish_sampled(domain: str, tree: Tree, screen_episodes: Optional[int] = Non
         base = np.asarray(runs[0].returns)
         return [float((np.asarray(r.returns) - base).mean()) for r in runs[1:]]
 
-    def key(t: Tree) -> str:
-        return json.dumps(tree_to_json(t), sort_keys=True)
-
     accepted, incumbent = tree, returns(tree, confirm_n, SELECT_SEED)
     start_value, scored, rounds, steps = float(incumbent.mean()), 0, 0, 0
-    current, ahead, visited = tree, 0, {key(tree)}
+    current, ahead, visited = tree, 0, {tree}
     while steps < MAX_ROUNDS:
         steps += 1
-        candidates = [c for c in neighbours(domain, current) if key(c) not in visited]
+        candidates = [c for c in neighbours(domain, current) if c not in visited]
         if not candidates:
             break
         gains = screen(current, candidates, screen_n)
@@ -231,7 +226,7 @@ def polish_sampled(domain: str, tree: Tree, screen_episodes: Optional[int] = Non
             current, ahead = ranked[0][0], ahead + 1
         else:
             break
-        visited.add(key(current))
+        visited.add(current)
     return Polished(accepted, float(incumbent.mean()), start_value, rounds, scored, time.perf_counter() - start)
 
 

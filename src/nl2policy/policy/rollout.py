@@ -66,6 +66,13 @@ def evaluate(domain: str, act: ActFn, episodes: int = 20, seed: int = 0, env=Non
 BatchActFn = Callable[[np.ndarray], np.ndarray]
 
 
+def reference_batch_act(domain: str) -> BatchActFn:
+    """The domain's reference policy (spec ``reference``, one observation -> an action) on a batch."""
+    d = get_domain(domain)
+    act = d.attribute(d.reference)
+    return lambda X: np.array([int(act(x)) for x in X], dtype=np.int64)
+
+
 def evaluate_batched(domain: str, act: BatchActFn, episodes: int, seed: int) -> Evaluation:
     """Mean return of `act` (a batch of feature rows -> action indices) over `episodes`
     episodes of the domain's fast vector env (``train_env_id``), all side by side: each env's
