@@ -25,11 +25,15 @@ $(STAMP): pyproject.toml requirements.lock
 demo: setup            ## the main job on embedded defaults
 	$(BIN)/nl2policy run --domain taxi
 
+# Two pytest workers (pytest-xdist): much of the suite waits on subprocesses, servers and locks,
+# so two cores run it in about two thirds of the time; tests that start Ray share one worker.
+XDIST := -n 2 --dist loadgroup
+
 test: setup            ## the whole test suite (CI runs this): under 10 minutes on 2 cores
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest $(XDIST)
 
 test-fast: $(STAMP)    ## the tests that are neither slow, nor in a browser, nor training: under 2 minutes
-	$(BIN)/python -m pytest -m "not slow and not browser and not train"
+	$(BIN)/python -m pytest $(XDIST) -m "not slow and not browser and not train"
 
 corpus:                ## refresh the shipped corpus copy from ../shared/corpus
 	cp ../shared/corpus/README.md ../shared/corpus/BRIEFING.md ../shared/corpus/vocabulary.json \

@@ -170,10 +170,14 @@ def test_a_half_sent_body_gets_408_and_the_connection_ends(live):
 
 
 @pytest.mark.slow
-def test_a_queued_run_starts_after_a_35_second_lock_and_after_a_damaged_file(live):
+def test_a_queued_run_starts_after_a_lock_longer_than_the_busy_timeout_and_after_a_damaged_file(live, monkeypatch):
     """The run manager used to die on the first store error, leaving every later run queued."""
     port, base = live
     import httpx
+
+    from nl2policy.app import store
+
+    monkeypatch.setattr(store, "BUSY_TIMEOUT_S", 3.0)  # SQLite's wait, 30 s in the product
 
     url = f"http://127.0.0.1:{port}"
     db = base / "app.sqlite"
@@ -187,11 +191,11 @@ def test_a_queued_run_starts_after_a_35_second_lock_and_after_a_damaged_file(liv
                 time.sleep(0.2)
             raise AssertionError("the queued run did not start within 30 s")
 
-        # another process holds an exclusive lock for 35 s: longer than SQLite's 30 s timeout
+        # another process holds an exclusive lock for 5 s: longer than the store's busy timeout
         locker = subprocess.Popen([sys.executable, "-c", f"""
 import sqlite3, time
 db = sqlite3.connect({str(db)!r}, isolation_level=None)
-db.execute("BEGIN EXCLUSIVE"); print("locked", flush=True); time.sleep(35); db.execute("COMMIT")
+db.execute("BEGIN EXCLUSIVE"); print("locked", flush=True); time.sleep(5); db.execute("COMMIT")
 """], stdout=subprocess.PIPE, text=True)
         assert locker.stdout.readline().strip() == "locked"
         locker.wait(timeout=60)

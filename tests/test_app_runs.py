@@ -49,7 +49,7 @@ def test_restart_keeps_finished_runs_and_resumes_interrupted_ones(tmp_path):
     with make_client(tmp_path) as client:
         done = client.post("/api/runs", json={"domain": "taxi", "tree": TREE, "steps": 512}).json()
         wait_for(client, done["id"], {"finished"})
-        long = client.post("/api/runs", json={"domain": "taxi", "tree": TREE, "steps": 8_000}).json()
+        long = client.post("/api/runs", json={"domain": "taxi", "tree": TREE, "steps": 4_096}).json()
         wait_for(client, long["id"], {"running"})
         deadline = time.time() + 120
         while not client.get(f"/api/runs/{long['id']}").json()["curve"] and time.time() < deadline:
@@ -60,8 +60,8 @@ def test_restart_keeps_finished_runs_and_resumes_interrupted_ones(tmp_path):
         view = client.get(f"/api/runs/{long['id']}").json()
         assert view["status"] == "interrupted"
         steps_before = view["curve"][-1]["step"]
-        assert 0 < steps_before < 8_000
+        assert 0 < steps_before < 4_096
         assert client.post(f"/api/runs/{long['id']}/resume").json()["status"] in ("queued", "running")
         view = wait_for(client, long["id"], {"finished", "failed"}, timeout=300)
         assert view["status"] == "finished", view["error"]
-        assert view["summary"]["steps"] >= 8_000
+        assert view["summary"]["steps"] >= 4_096

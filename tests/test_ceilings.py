@@ -108,20 +108,24 @@ def test_sampled_ceilings_refuse_a_depth_the_climb_cannot_keep(tmp_path):
 
 
 @pytest.mark.slow
-def test_sampled_ceiling_climbs_from_every_start_and_reports_fresh_scenes(tmp_path):
+def test_sampled_ceiling_climbs_from_every_start_and_reports_fresh_scenes(tmp_path, monkeypatch):
     """Every state-blind tree and the example's tree is a start; the ceiling is the best by the
     confirmation scenes, its fresh score is rollout's on EVAL_SEED, and no climb ends worse than
     its start on the confirmation scenes."""
     from nl2policy.domains import get_domain
+    from nl2policy.policy import ceiling_climb
     from nl2policy.policy.ceiling_climb import compute_ceilings, write_ceilings
     from nl2policy.policy.convert import tree_batch_act_fn
     from nl2policy.policy.optimize import EVAL_SEED
     from nl2policy.policy.rollout import evaluate_batched
 
     d = get_domain("highway")
+    every = ceiling_climb.starts("highway")
+    assert [name for name, _ in every] == [f"always {a}" for a in d.actions] + ["the example's tree"]
+    monkeypatch.setattr(ceiling_climb, "starts", lambda domain: [every[0], every[-1]])  # two climbs: the test's time
     result = compute_ceilings("highway", screen_episodes=4, select_episodes=24, eval_episodes=16)
     climbs = result["climbs"]
-    assert [c["start_name"] for c in climbs] == [f"always {a}" for a in d.actions] + ["the example's tree"]
+    assert [c["start_name"] for c in climbs] == [every[0][0], "the example's tree"]
     assert all(c["selection"] >= c["start_selection"] for c in climbs)
     assert result["best"] == max(range(len(climbs)), key=lambda k: climbs[k]["selection"])
     best = climbs[result["best"]]

@@ -113,3 +113,19 @@ def test_translate_works_when_the_data_folder_cannot_be_made(tmp_path):
                                        "If I have a passenger go to the airport, else go to the city"], env)
     assert proc.returncode == 0, proc.stderr[-1000:]
     assert "Traceback" not in proc.stderr and json.loads(proc.stdout)["tree"]["if"] == "has_passenger"
+
+
+def test_a_run_submitted_before_the_reconcile_is_not_marked_left_over(tmp_path):
+    """On a busy machine the run manager's thread may reconcile after the first request has
+    queued a run: that run stays queued; a run left by an earlier server is interrupted."""
+    from nl2policy.app.runs import RunManager
+
+    store = Store(tmp_path / "app.sqlite")
+    tree = {"do": "wait"}
+    left = store.add_run("taxi", tree, 512, 0, tmp_path / "runs", None)
+    fresh = store.add_run("taxi", tree, 512, 0, tmp_path / "runs", None)
+    manager = RunManager(store)  # not started: no trainer is launched
+    manager.submit(fresh["id"])
+    manager.reconcile()
+    assert store.get_run(fresh["id"])["status"] == "queued"
+    assert store.get_run(left["id"])["status"] == "interrupted"

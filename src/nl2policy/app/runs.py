@@ -47,6 +47,9 @@ class RunManager:
         self._wake = threading.Condition(self._lock)
         self._active: dict[str, subprocess.Popen] = {}
         self._cancelling: set[str] = set()
+        # runs submitted to this manager: the reconcile, which may run after the first requests
+        # on a busy machine, must not mark them as left over from an earlier server
+        self._submitted: set[str] = set()
         self._watchers: list[threading.Thread] = []
         self._stopping = False
         self._thread = threading.Thread(target=self._loop, name="run-manager", daemon=True)
@@ -55,19 +58,27 @@ class RunManager:
         self._thread.start()  # it reconciles first, retrying while the store fails
 
     def reconcile(self) -> None:
-        """After a restart no run of ours is going: record what the folders say happened."""
+        """After a restart no run of an earlier server is going: record what the folders say
+        happened. Runs submitted to this manager meanwhile are left alone (checked under the lock
+        `submit` takes, so a submission can never be overwritten as "interrupted")."""
         for status in ("running", "queued"):
             for run in self.store.list_runs(status=status, limit=10_000):
-                out = Path(run["out_dir"])
-                summary = _read_summary(out)
-                pid = holder(out)
-                if summary is not None and pid is None:
-                    self.store.set_run_status(run["id"], "finished", summary=summary)
-                elif pid is not None:
-                    self.store.set_run_status(run["id"], "interrupted", error=f"process {pid} from an earlier server "
-                                              "is still writing this run; it can be resumed once that process ends")
-                else:
-                    self.store.set_run_status(run["id"], "interrupted", error="the server stopped; resume to continue")
+                with self._lock:
+                    current = self.store.get_run(run["id"])  # as it is now, not as listed
+                    if run["id"] not in self._submitted and current is not None and current["status"] == status:
+                        self._reconcile_one(current)
+
+    def _reconcile_one(self, run: dict) -> None:
+        out = Path(run["out_dir"])
+        summary = _read_summary(out)
+        pid = holder(out)
+        if summary is not None and pid is None:
+            self.store.set_run_status(run["id"], "finished", summary=summary)
+        elif pid is not None:
+            self.store.set_run_status(run["id"], "interrupted", error=f"process {pid} from an earlier server "
+                                      "is still writing this run; it can be resumed once that process ends")
+        else:
+            self.store.set_run_status(run["id"], "interrupted", error="the server stopped; resume to continue")
 
     def stop(self) -> None:
         with self._wake:
@@ -82,8 +93,9 @@ class RunManager:
 
     def submit(self, run_id: str) -> None:
         """Queue a run (new, or interrupted and being resumed)."""
-        self.store.set_run_status(run_id, "queued")
         with self._wake:
+            self._submitted.add(run_id)
+            self.store.set_run_status(run_id, "queued")
             self._wake.notify_all()
 
     def cancel(self, run_id: str) -> bool:

@@ -37,6 +37,10 @@ CREATE TABLE IF NOT EXISTS submissions (
 );
 """
 
+BUSY_TIMEOUT_S = 30.0
+"""How long a request waits for another writer's lock before the store reports a fault (SQLite's
+busy timeout); read at every connection."""
+
 RUN_STATES = ("queued", "running", "finished", "failed", "interrupted", "cancelled")
 WAITING = ("queued", "running")
 
@@ -67,7 +71,7 @@ class Store:
         except OSError as exc:
             raise _unwritable(self.path, exc.strerror or str(exc)) from exc
         try:
-            db = sqlite3.connect(self.path, timeout=30)
+            db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S)
         except sqlite3.Error as exc:
             raise _unwritable(self.path, str(exc)) from exc
         try:
@@ -88,7 +92,7 @@ class Store:
 
     @contextmanager
     def _connect(self) -> Iterator[sqlite3.Connection]:
-        db = sqlite3.connect(self.path, timeout=30, isolation_level=None)
+        db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
         db.row_factory = sqlite3.Row
         try:
             db.execute("BEGIN IMMEDIATE")
