@@ -7,7 +7,7 @@ import numpy as np
 from typer.testing import CliRunner
 
 from experiments.policy.__main__ import app
-from experiments.policy.table2 import _reach, steps_to
+from experiments.policy.table2 import _reach, parse_knobs, steps_to
 from nl2policy.policy.optimize import rolling_mean
 
 pytestmark = pytest.mark.train
@@ -24,6 +24,16 @@ def test_steps_to_a_level_and_the_median_over_runs_that_never_reach_it():
     assert steps_to([(0, 1.0)], 2.0) is None
     assert _reach([10, 30, None])["median"] == 30  # a run that never reached counts as slowest
     assert _reach([10, None, None]) == {"median": None, "reached": 1, "runs": 3, "values": [10, None, None]}
+
+
+def test_knobs_changed_for_a_grid_are_typed_and_checked(tmp_path):
+    assert parse_knobs(["train_envs=8", "leaf_mass = 0.9"]) == {"train_envs": 8, "leaf_mass": 0.9}
+    for bad in (["leaf_mas=0.9"], ["leaf_mass"], ["leaf_mass=zero"]):
+        with pytest.raises(ValueError, match="--knob"):
+            parse_knobs(bad)
+    result = runner.invoke(app, ["table2", "--domain", "taxi", "--knob", "gamma=1", "--out", str(tmp_path)])
+    assert result.exit_code == 2 and "--knob 'gamma=1'" in result.output and "Traceback" not in result.output
+    assert not (tmp_path / "taxi").exists()
 
 
 def test_tiny_experiment_writes_table_and_skips_finished_runs(tmp_path):
@@ -48,6 +58,14 @@ def test_tiny_experiment_writes_table_and_skips_finished_runs(tmp_path):
     assert tree_run["probes"][0] == {"step": 0, **tree_run["probes"][0]}
     assert abs(tree_run["probes"][0]["policy"] - tree_run["initial_tree_score"]) < 1e-9
     assert tree_run["initial_tree_score"] <= tree_run["kept_score"] <= tree_run["polished_score"] + 1e-12
+    # the last probe scores the tree handed back as PPO's last (the better reading of the last checkpoint)
+    from nl2policy.domains import get_domain
+    from nl2policy.policy.convert import tree_act_fn
+    from nl2policy.policy.keep_best import tree_from_json
+
+    assert tree_run["last_read"] in ("rounded", "distilled")
+    last = tree_act_fn("taxi", tree_from_json(tree_run["last_tree"]))
+    assert tree_run["probes"][-1]["policy"] == pytest.approx(get_domain("taxi").exact.expected_return(last), abs=1e-9)
     for r in table["runs"]:  # every handed-back policy maps features to actions: none beats the ceiling
         assert len(r["probes"]) >= 2 and all(p["policy"] <= ceiling + 1e-9 for p in r["probes"])
         assert abs(r["soft_minus_discrete"] - (r["probes"][-1]["soft"] - r["probes"][-1]["policy"])) < 1e-12

@@ -38,26 +38,32 @@ def table2(
     out: Path = typer.Option(Path("results/policy")),
     workers: int = typer.Option(1, min=1, max=MAX_COUNT, help="Runs side by side in forked processes on this machine"),
     ray: Optional[str] = typer.Option(None, "--ray", help=ray_option_help()),
+    knob: list[str] = typer.Option([], help="KEY=VALUE: a domain knob (spec.Knobs) changed for every run, "
+                                       "e.g. leaf_mass=0.9; use another --out"),
 ) -> None:
     """Table 2: tree-initialized DDT vs random DDT vs MLP (resumable; finished runs are skipped)."""
     import torch
 
     from nl2policy.console import console, domain_or_fail, fail, progress_bar
     from experiments.grid import Job, ray_failure, run_jobs
-    from experiments.policy.table2 import REACH, plan, run_one, select_trees, summarize, table_yardsticks
+    from experiments.policy.table2 import REACH, parse_knobs, plan, run_one, select_trees, summarize, table_yardsticks
     from experiments.policy.table2_report import write_figure, write_table
 
     torch.set_num_threads(1)
     domain_or_fail(domain)
+    try:
+        knobs = parse_knobs(knob)
+    except ValueError as exc:
+        fail(str(exc))
     command = (f"python -m experiments.policy table2 --domain {domain} --steps {steps} --candidates {candidates} --best {best} "
                f"--select-episodes {select_episodes} --tree-seeds {tree_seeds} --baseline-seeds {baseline_seeds} --out {out}"
-               + (f" --workers {workers}" if workers > 1 else ""))
+               + (f" --workers {workers}" if workers > 1 else "") + "".join(f" --knob {k}" for k in knob))
     root = out / domain
     selected = select_trees(domain, candidates, best, select_episodes, 0, root)
     yardsticks = table_yardsticks(domain, root)
     runs = plan(selected, tree_seeds, baseline_seeds)
     jobs = [Job(name, run_one, {"domain": domain, "method": method, "seed": seed, "steps": steps,
-                                "run_dir": root / "runs" / name, "tree_json": tree_json})
+                                "run_dir": root / "runs" / name, "tree_json": tree_json, "knobs": knobs})
             for name, method, seed, tree_json in runs]
     finished: dict[str, dict] = {}
     with progress_bar() as bar:

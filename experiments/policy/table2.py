@@ -21,6 +21,7 @@ experiment skips finished runs and resumes unfinished ones.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections import Counter
 from pathlib import Path
@@ -171,18 +172,21 @@ def normalized(value: float, yardsticks: dict) -> float:
 
 def policy_probe(domain: str, method: str) -> Optional[Callable]:
     """What Table 2 measures at every checkpoint: the return of the policy the method hands
-    back (a DDT method: its discretized tree; the MLP: its greedy actions) and of the soft
-    policy PPO trains (sampled actions). Exact where the domain has an exact model; else on
+    back (a DDT method: the checkpoint's tree as `optimize` reads it, the better of its rounding
+    and its distillation, given by the training loop; the MLP: its greedy actions) and of the
+    soft policy PPO trains (sampled actions). Exact where the domain has an exact model; else on
     ``probe_episodes`` fast-sim scenes from ``EVAL_SEED``, common to every run and checkpoint.
     None for a domain with neither."""
     d = get_domain(domain)
 
-    def handed_back(model):
-        return ddt_to_tree(domain, actor_ddt(model)) if method != "mlp" else None
+    def handed_back(model, tree_json):
+        if method == "mlp":
+            return None
+        return tree_from_json(tree_json) if tree_json is not None else ddt_to_tree(domain, actor_ddt(model))
 
     if d.exact is not None:
-        def exact_probe(model) -> dict:
-            tree = handed_back(model)
+        def exact_probe(model, tree_json: Optional[dict] = None) -> dict:
+            tree = handed_back(model, tree_json)
             act = tree_act_fn(domain, tree) if tree is not None else soft_act_fn(model, deterministic=True)
             return {"policy": float(d.exact.expected_return(act)),
                     "soft": float(d.exact.expected_return_mixed(action_probs_fn(model)))}
@@ -191,10 +195,10 @@ def policy_probe(domain: str, method: str) -> Optional[Callable]:
     if d.train_env_id is None:
         return None
 
-    def sampled_probe(model) -> dict:
+    def sampled_probe(model, tree_json: Optional[dict] = None) -> dict:
         probs = action_probs_fn(model)
         rng = np.random.default_rng(EVAL_SEED)
-        tree = handed_back(model)
+        tree = handed_back(model, tree_json)
         greedy = tree_batch_act_fn(domain, tree) if tree is not None else (lambda x: probs(x).argmax(axis=1))
 
         def sampled(x):  # inverse-CDF draws: one uniform per row
@@ -207,11 +211,32 @@ def policy_probe(domain: str, method: str) -> Optional[Callable]:
     return sampled_probe
 
 
+def parse_knobs(pairs: list[str]) -> dict:
+    """``["ddt_crisp=true", "leaf_mass=0.9"]`` -> ``{"ddt_crisp": True, "leaf_mass": 0.9}``, each
+    value typed as TOML reads it and each key a field of ``spec.Knobs``; ValueError otherwise."""
+    import tomllib
+
+    from nl2policy.domains.spec import Knobs
+
+    names = {f.name for f in dataclasses.fields(Knobs)}
+    out = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or key.strip() not in names:
+            raise ValueError(f"--knob {pair!r}: give KEY=VALUE with KEY one of {', '.join(sorted(names))}")
+        try:
+            out[key.strip()] = tomllib.loads(f"v = {value.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            raise ValueError(f"--knob {pair!r}: {value!r} is not a TOML value (true, 0.9, \"text\")") from None
+    return out
+
+
 def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree_json: Optional[dict],
             progress: Optional[Callable[[int, int], None]] = None, polish: bool = True,
-            save_model: Optional[Path] = None) -> dict:
+            save_model: Optional[Path] = None, knobs: Optional[dict] = None) -> dict:
     """One run of the grid: PPO for `steps`, then the records Table 2 reads (result.json).
-    `save_model`: also save the trained network there (VIPER's teacher), before result.json."""
+    `save_model`: also save the trained network there (VIPER's teacher), before result.json.
+    `knobs`: domain knobs changed for this run (``parse_knobs``), recorded in result.json."""
     result_path = run_dir / "result.json"
     if result_path.is_file():
         result = json.loads(result_path.read_text())
@@ -222,8 +247,9 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
     tree = parse_tree(tree_json, d.vocab) if tree_json else None
     scorer, rule = tree_scorer(domain)  # one scorer: its cache of sampled scores serves every checkpoint and the start
     score = checkpoint_tree_score(domain, True, scorer) if method != "mlp" else None
-    model, episodes, seconds, best, probes = train_checkpointed(
-        lambda: make_ppo(domain, method, seed, tree), domain, seed, steps, run_dir, progress, score,
+    changed = dataclasses.replace(d.knobs, **knobs) if knobs else None
+    model, episodes, seconds, best, probes, last_read = train_checkpointed(
+        lambda: make_ppo(domain, method, seed, tree, knobs=changed), domain, seed, steps, run_dir, progress, score,
         probe=policy_probe(domain, method), checkpoints=CHECKPOINTS)
     window = d.knobs.rolling_window
     write_curve(episodes, window, run_dir, f"{domain}: {LABEL[method]} seed {seed}")
@@ -234,11 +260,14 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
               "initial": float(full[0]), "best": float(full.max()), "final": float(rolling[-1]),
               "curve": [[s, float(m)] for (s, _), m in zip(episodes, rolling)], "probes": probes,
               "probe_scored_by": probe_rule(domain)}
+    if knobs:
+        result["knobs"] = knobs
     if probes:  # PPO's own discretization loss: the handed-back policy minus the soft one, at the end
         result["soft_minus_discrete"] = probes[-1]["soft"] - probes[-1]["policy"]
     if method != "mlp":  # what a user gets back: PPO's last tree, the kept tree, the polished one
-        last = ddt_to_tree(domain, actor_ddt(model))
+        last = tree_from_json(last_read["tree"])
         result.update({"last_tree": tree_to_json(last), "last_tree_has_raw_tests": has_raw_tests(last),
+                       "last_read": last_read.get("read", "rounded"),
                        "kept_tree": best["tree"], "kept_score": best["score"], "kept_step": best["step"],
                        "kept_read": best.get("read", "rounded")})
         if tree is not None:

@@ -72,15 +72,21 @@ def write_table(domain: str, table: dict, results: list[dict], settings: dict, o
         lines.append(f"| *{y[key]['what']}* | | | | | | {y[key]['value']:.3f} ({100 * normalized(y[key]['value'], y):.0f}%)"
                      " | | | | |")
     tree_rows = table.get("tree_ddt", {})
+    ddt_runs = [r for r in results if r.get("method") != "mlp"]
+    if ddt_runs and all("last_read" in r for r in ddt_runs):
+        reading = ("tree at that checkpoint as `optimize` reads it, the better of its rounding and its distillation "
+                   "by the selection scenes")
+    else:  # runs from before the probe read trees as optimize does
+        reading = "rounded (discretized) tree"
     lines += ["", f"Cells: median ± standard error across runs; in brackets, the normalized score: 0% = uniform random "
                   "actions, 100% = the ceiling (the italic rows, scored "
                   f"{y['scored_by']}). Initial and best: the paper's columns, the rolling mean of training episode "
                   f"reward over {window} episodes (initial = the first full window, best = the highest). Steps to "
                   f"{pct}: the first step at which the rolling reward, or the policy the method hands back (DDT: its "
-                  "discretized tree; MLP: its greedy actions; probed at step 0 and every checkpoint), reaches a "
+                  f"{reading}; MLP: its greedy actions; probed at step 0 and every checkpoint), reaches a "
                   f"normalized {pct} (a return of {table['reach_return']:.3f}); the median counts a run that never "
                   "does as infinitely slow (in brackets: runs that did). Handed back, last: that policy at the end of "
-                  "training; kept tree: the best of the start tree and every checkpoint's discretized tree; + polish: "
+                  "training; kept tree: the best of the start tree and every checkpoint's tree; + polish: "
                   "the local search from the kept tree (\"-\" unless every run's kept tree could be polished: a kept tree "
                   "with raw threshold tests cannot); returned: what `optimize` hands back, the better of the two by "
                   "the scores it chose them on. Soft - discrete: "

@@ -54,7 +54,8 @@ def run_pipeline(console: Console, err: Console, domain: str, text: str, steps: 
     table.add_column("mean return", justify="right")
     table.add_row("translated tree", f"{summary['initial_mean_return']:.2f}")
     table.add_row("trained DDT (soft)", f"{summary['final_soft_ddt_return']:.2f}")
-    table.add_row("PPO's last tree (discretized)", f"{summary['last_tree_mean_return']:.2f}")
+    read = summary["keep_best"].get("last_checkpoint_read", "rounded")
+    table.add_row(f"PPO's last tree ({read})", f"{summary['last_tree_mean_return']:.2f}")
     table.add_row(f"returned tree ({summary['returned']})", f"{summary['final_mean_return']:.2f}")
     exact = get_domain(domain).exact
     if exact is not None:

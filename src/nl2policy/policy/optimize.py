@@ -12,7 +12,7 @@ distillation, the dictionary tree that acts most like it in the states PPO visit
 at 19.53 read by distillation: results/policy/history/distilled_reading_probe.md), then, with
 ``polish``, a hill climb over questions and actions from it (``polish``: on the exact model
 where the domain has one, else on common sampled scenes of its fast simulator). PPO's own last
-tree (``last_tree.json``), the kept tree (``best_tree.json``) and the polished one
+tree (``last_tree.json``, its last checkpoint read the same two ways), the kept tree (``best_tree.json``) and the polished one
 (``polished_tree.json``) are written and scored beside it, so the paper's DDT + PPO and each
 added step are reported separately.
 """
@@ -33,7 +33,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from nl2policy.domains import get_domain
 from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn
 from nl2policy.policy.distill import VisitedStates, distilled_tree
-from nl2policy.policy.keep_best import keep_best, tree_scorer
+from nl2policy.policy.keep_best import keep_best, tree_from_json, tree_scorer
 from nl2policy.policy.rollout import evaluate, tree_policy
 from nl2policy.policy.sb3_policy import TreePPO, action_probs_fn, actor_ddt, make_ppo, make_vec_env, soft_act_fn
 from nl2policy.trees import Tree, tree_to_json
@@ -119,13 +119,14 @@ class Trained(NamedTuple):
     episodes: list  # [(step, episode return)] of the training episodes, all sessions
     seconds: float  # training seconds, all sessions
     best: Optional[dict]  # the best checkpoint tree {"step", "tree", "score", "read"}; None without score_tree
-    probes: list  # [{"step", **probe(model)}] at step 0 and after every chunk; [] without probe
+    probes: list  # [{"step", **probe(model, tree)}] at step 0 and after every chunk; [] without probe
+    last: Optional[dict]  # the last checkpoint's tree, read as `best` ({"step", "tree", "score", "read"}); None without score_tree
 
 
 def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int, steps: int, run_dir: Path,
                        progress: Progress = None,
                        score_tree: Optional[TreeScore] = None,
-                       simulator: str = "fast", probe: Optional[Callable[[PPO], dict]] = None,
+                       simulator: str = "fast", probe: Optional[Callable[[PPO, Optional[dict]], dict]] = None,
                        checkpoints: int = 10) -> Trained:
     """Train to `steps` env steps in about `checkpoints` chunks, checkpointing into `run_dir`
     after each; resumes a saved run.
@@ -134,7 +135,9 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
     ``distill.VisitedStates``) is scored after every chunk and the best one kept
     (``{"step", "tree", "score", "read"}``; the initial actor's tree counts as step 0). With `probe`,
     its measurements of the model (Table 2: the exact return of the policy a method hands
-    back) are recorded at step 0 and after every chunk, so a curve of them survives resumes."""
+    back) are recorded at step 0 and after every chunk, so a curve of them survives resumes; it is
+    given the checkpoint's tree as read above (None without `score_tree`), so what it scores is
+    the tree a user would get from that checkpoint."""
     # PPO here runs batch-of-one forward passes through tiny nets: extra intra-op threads only
     # contend (measured 25x slower with 2 threads on a busy 2-core machine), so use one.
     torch.set_num_threads(1)
@@ -152,18 +155,20 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
         model = TreePPO.load(ckpt_path, env=make_vec_env(domain, resumed_seed, simulator), device="cpu")
         model.set_random_seed(resumed_seed)  # load reseeds with the run's first seed: new episodes, not a replay
         episodes, seconds, chunks = [tuple(e) for e in state["episodes"]], state["seconds"], state["chunks"]
-        best, probes = state.get("best_tree"), state.get("probes", [])
-        if best is None and score_tree is not None:  # a checkpoint from before its run tracked trees
+        best, probes, last = state.get("best_tree"), state.get("probes", []), state.get("last_tree")
+        if score_tree is not None and (best is None or last is None):  # a checkpoint from before its run tracked trees
             tree_json, score, read = score_tree(model, None)
-            best = {"step": int(model.num_timesteps), "tree": tree_json, "score": score, "read": read}
+            last = {"step": int(model.num_timesteps), "tree": tree_json, "score": score, "read": read}
+            best = best or last
     else:
         model, episodes, seconds, chunks = model_factory(), [], 0.0, 0
-        best, probes = None, []
+        best = last = None
+        probes = []
         if score_tree is not None:
             tree_json, score, read = score_tree(model, None)
-            best = {"step": 0, "tree": tree_json, "score": score, "read": read}
+            best = last = {"step": 0, "tree": tree_json, "score": score, "read": read}
         if probe is not None:
-            probes.append({"step": 0, **probe(model)})
+            probes.append({"step": 0, **probe(model, last and last["tree"])})
     rollout = model.n_steps * model.n_envs
     chunk = rollout * max(1, steps // (checkpoints * rollout))
     total = -(-steps // rollout) * rollout  # PPO trains whole rollouts
@@ -176,17 +181,18 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
         chunks += 1
         if score_tree is not None:
             tree_json, score, read = score_tree(model, visited.states())
+            last = {"step": int(model.num_timesteps), "tree": tree_json, "score": score, "read": read}
             if score > best["score"]:
-                best = {"step": int(model.num_timesteps), "tree": tree_json, "score": score, "read": read}
+                best = last
         if probe is not None:
-            probes.append({"step": int(model.num_timesteps), **probe(model)})
+            probes.append({"step": int(model.num_timesteps), **probe(model, last and last["tree"])})
         _write_atomically(ckpt_path, model.save)
         state = {"steps": int(model.num_timesteps), "seconds": seconds, "chunks": chunks, "episodes": episodes,
-                 "best_tree": best, "probes": probes, "simulator": trained_on}
+                 "best_tree": best, "last_tree": last, "probes": probes, "simulator": trained_on}
         _write_atomically(state_path, lambda path: path.write_text(json.dumps(state)))
     if progress:
         progress(total, total)
-    return Trained(model, episodes, seconds, best, probes)
+    return Trained(model, episodes, seconds, best, probes, last)
 
 
 def rolling_mean(returns: list[float], window: int) -> np.ndarray:
@@ -246,10 +252,10 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
         raise OptimizeRefused(f"{out} holds a checkpoint of a run from a different tree; choose another --out")
     tree_path.write_text(json.dumps(tree_to_json(tree), indent=2))
     scorer, rule = tree_scorer(domain)
-    model, episodes, seconds, best, _ = train_checkpointed(
+    model, episodes, seconds, best, _, last = train_checkpointed(
         lambda: make_ppo(domain, "tree_ddt", seed, tree, simulator=simulator), domain, seed, steps, out, progress,
         checkpoint_tree_score(domain, True, scorer), simulator)
-    last_tree = ddt_to_tree(domain, actor_ddt(model))
+    last_tree = tree_from_json(last["tree"])  # PPO's own tree at the end, read as every checkpoint's
     (out / "last_tree.json").write_text(json.dumps(tree_to_json(last_tree), indent=2))
     start = time.perf_counter()
     initial_score = scorer(tree)
@@ -283,10 +289,11 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
         "last_rolling_return": float(rolling[-1]) if len(rolling) else None,
         "keep_best": {"scored_by": rule, "initial_score": initial_score, "best_checkpoint_score": best["score"],
                       "best_checkpoint_step": best["step"], "best_checkpoint_read": best.get("read", "rounded"),
+                      "last_checkpoint_read": last.get("read", "rounded"),
                       "kept": kept_from, "kept_score": kept_score,
                       "seconds": round(select_seconds, 2)},
     }
-    # PPO's own discretization loss: its last discretized tree against the soft DDT it came from
+    # PPO's own discretization loss: its last tree (the better reading) against the soft DDT it came from
     summary["discretization_gap"] = summary["last_tree_mean_return"] - summary["final_soft_ddt_return"]
     if polished is not None:
         summary["polish"] = {"start_score": polished.start_value, "score": polished.value, "rounds": polished.rounds,
