@@ -194,6 +194,8 @@ def test_optimize_highway_on_the_twin_reports_highway_env_returns(tmp_path):
     assert score(returned) >= score(tree)
     state = json.loads((tmp_path / "state.json").read_text())
     assert state["simulator"] == "fast"
+    # polish off: the returned tree is the kept one, so its return is the pre-polish return
+    assert summary["kept_mean_return"] == summary["final_mean_return"] and "polish" not in summary
 
 
 @pytest.mark.train

@@ -154,3 +154,16 @@ def test_highway_trees_are_judged_on_the_probe_scenes_not_the_ones_that_chose_th
     table = summarize([row], "highway", {"floor": {"value": 0.0}, "ceiling": {"value": 1.0}})
     assert table["tree_ddt"]["polished_score"]["median"] == probe[other]
     assert not judge_trees("taxi", {"method": "tree_ddt", "kept_tree": tree_to_json(load_corpus("taxi")[0].tree)})
+
+
+def test_weak_taxi_starts_are_distinct_corpus_policies_below_the_bar():
+    """Issue 45's weak starts: frequent corpus policies below WEAK_BELOW, one per exact return,
+    spanning the returns the issue's runs started from (6.21, 4.87, 0.00)."""
+    from experiments.taxi_never_worse import WEAK_BELOW, starts, weak_starts
+
+    weak = weak_starts()
+    values = [round(s["exact"], 4) for s in weak]
+    assert all(v < WEAK_BELOW for v in values) and len(set(values)) == len(values)
+    assert {6.2057, 4.8665, 0.0} <= set(values)
+    frequent = {round(s["exact"], 4) for s in starts(lowest=0)}
+    assert {v for v in frequent if v < WEAK_BELOW} == set(values)  # none left out

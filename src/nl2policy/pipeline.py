@@ -56,6 +56,7 @@ def run_pipeline(console: Console, err: Console, domain: str, text: str, steps: 
     table.add_row("trained DDT (soft)", f"{summary['final_soft_ddt_return']:.2f}")
     read = summary["keep_best"].get("last_checkpoint_read", "rounded")
     table.add_row(f"PPO's last tree ({read})", f"{summary['last_tree_mean_return']:.2f}")
+    table.add_row(f"kept tree, before polish ({summary['keep_best']['kept']})", f"{summary['kept_mean_return']:.2f}")
     table.add_row(f"returned tree ({summary['returned']})", f"{summary['final_mean_return']:.2f}")
     exact = get_domain(domain).exact
     if exact is not None:

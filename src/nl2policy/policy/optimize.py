@@ -281,6 +281,8 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
         "evaluated_on": d.env_id, "eval_episodes": n, "eval_seed": EVAL_SEED, "returned": returned,
         "initial_mean_return": evaluate(domain, tree_policy(domain, tree), n, EVAL_SEED).mean_return,
         "final_mean_return": evaluate(domain, tree_act_fn(domain, final_tree), n, EVAL_SEED).mean_return,
+        # the tree PPO handed back before any polish (keep-best), on the same episodes
+        "kept_mean_return": evaluate(domain, tree_act_fn(domain, kept), n, EVAL_SEED).mean_return,
         "last_tree_mean_return": evaluate(domain, tree_act_fn(domain, last_tree), n, EVAL_SEED).mean_return,
         "final_soft_ddt_return": evaluate(domain, soft_act_fn(model, deterministic=False), n, EVAL_SEED).mean_return,
         "final_tree_has_raw_tests": has_raw_tests(final_tree),
