@@ -102,6 +102,31 @@ def test_ppo_improves_a_deliberately_bad_taxi_tree_judged_exactly(tmp_path):
     assert json.loads((tmp_path / "best_tree.json").read_text()) != tree_to_json(bad)
 
 
+def test_leaf_temperature_anneals_from_one_to_the_knob_and_only_sharpens_the_leaves(tmp_path):
+    """The leaves' softmax temperature goes down a line from 1 to leaf_temperature_end over the
+    run, so the soft policy ends near the tree read from it; a knob of 1 leaves the DDT alone."""
+    import dataclasses
+
+    from nl2policy.domains import get_domain
+    from nl2policy.policy.optimize import train_checkpointed
+
+    knobs = dataclasses.replace(get_domain("taxi").knobs, leaf_temperature_end=0.1)
+    trained = train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, TREE, knobs=knobs), "taxi", 0, 2048,
+                                 tmp_path / "annealed", checkpoints=4)
+    ddt = actor_ddt(trained.model)
+    # the last of 4 rollouts of 512 starts at step 1536: 1 + (0.1 - 1) * 1536 / 2048
+    assert float(ddt.leaf_temperature) == pytest.approx(1 + (0.1 - 1) * 1536 / 2048)
+    x = torch.rand(64, len(get_domain("taxi").features))
+    with torch.no_grad():  # the policy mixes the paths' leaves, each leaf's softmax taken at that temperature
+        expected = ddt.log_path_probs(x).exp() @ torch.softmax(ddt.leaf_logits / ddt.leaf_temperature, dim=-1)
+        assert torch.allclose(ddt(x).exp(), expected, atol=1e-6)
+        plain = ddt.log_path_probs(x).exp() @ torch.softmax(ddt.leaf_logits, dim=-1)
+        assert not torch.allclose(ddt(x).exp(), plain, atol=1e-3)
+    unchanged = train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, TREE), "taxi", 0, 1024, tmp_path / "plain",
+                                   checkpoints=2)
+    assert float(actor_ddt(unchanged.model).leaf_temperature) == 1.0
+
+
 def test_actor_learning_rate_scale_survives_sb3s_schedule():
     from nl2policy.domains import get_domain
 

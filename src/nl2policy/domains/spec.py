@@ -59,6 +59,7 @@ class Knobs:
     train_envs: int = 1  # episodes side by side when training on the domain's fast vector env
     select_episodes: Optional[int] = None  # fast-env episodes for keep-best's sampled score of a tree
     polish_screen_episodes: Optional[int] = None  # fast-env episodes a sampled polish screens each neighbour on
+    leaf_temperature_end: float = 1.0  # DDT leaf softmax temperature at the end of training, annealed from 1
 
 
 Act = Callable[[np.ndarray], int]

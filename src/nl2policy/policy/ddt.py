@@ -80,6 +80,11 @@ class DDT(nn.Module):
         self.weights = nn.Parameter(torch.zeros(shape.nodes, features))
         self.comparators = nn.Parameter(torch.zeros(shape.nodes))
         self.leaf_logits = nn.Parameter(torch.zeros(shape.leaves, actions))
+        # Leaf softmax temperature, set during training by optimize.LeafAnneal from 1 down to
+        # `anneal_to` (1: no annealing), so the soft policy PPO trains ends near the tree read
+        # from it. Not saved: the schedule sets it again from the step count.
+        self.register_buffer("leaf_temperature", torch.tensor(1.0), persistent=False)
+        self.anneal_to = 1.0
 
     def node_logits(self, x: torch.Tensor) -> torch.Tensor:
         """gamma * (w_n . x - c_n) for every node, shape (batch, nodes)."""
@@ -97,7 +102,7 @@ class DDT(nn.Module):
         # action every leaf gives < 1e-30, and keeps its log finite for SB3's entropy.
         log_path = self.log_path_probs(x)
         top = log_path.max(dim=1, keepdim=True).values
-        mixture = torch.exp(log_path - top) @ torch.softmax(self.leaf_logits, dim=-1)
+        mixture = torch.exp(log_path - top) @ torch.softmax(self.leaf_logits / self.leaf_temperature, dim=-1)
         return torch.log(mixture.clamp_min(1e-30)) + top
 
     @torch.no_grad()

@@ -112,6 +112,25 @@ def checkpoint_tree_score(domain: str, sampled: bool = False,
     return score
 
 
+class LeafAnneal(BaseCallback):
+    """Before each rollout, set the DDT's leaf temperature on a line from 1 at step 0 to its
+    ``anneal_to`` at `total` steps; a rollout and the update on it share one temperature."""
+
+    def __init__(self, total: int) -> None:
+        super().__init__()
+        self.total = total
+
+    def _on_rollout_start(self) -> None:
+        ddt = getattr(self.model.policy, "action_net", None)
+        end = getattr(ddt, "anneal_to", 1.0)
+        if end != 1.0:
+            frac = min(1.0, self.model.num_timesteps / max(1, self.total))
+            ddt.leaf_temperature.fill_(1.0 + (end - 1.0) * frac)
+
+    def _on_step(self) -> bool:
+        return True
+
+
 class Trained(NamedTuple):
     """What ``train_checkpointed`` hands back."""
 
@@ -175,7 +194,7 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
     log, visited = EpisodeLog(episodes, total, progress), VisitedStates()
     while model.num_timesteps < steps:
         start = time.perf_counter()
-        model.learn(min(chunk, steps - model.num_timesteps), callback=CallbackList([log, visited]),
+        model.learn(min(chunk, steps - model.num_timesteps), callback=CallbackList([log, visited, LeafAnneal(total)]),
                     reset_num_timesteps=False)
         seconds += time.perf_counter() - start
         chunks += 1
