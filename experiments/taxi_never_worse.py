@@ -143,6 +143,11 @@ def main() -> None:
     ceiling = best_tree(d.exact.tables(), depth=3).value
     chosen = starts() if args.starts == "many" else weak_starts()
     rows = []
+
+    def settings() -> dict:
+        return {"starts": len(chosen), "starts_chosen": args.starts, "seeds": list(range(args.seeds)),
+                "steps": args.steps, "finished_runs": f"{len(rows)} of {len(chosen) * args.seeds}"}
+
     for start in chosen:
         for seed in range(args.seeds):
             run_dir = args.out / "runs" / f"{start['group']}{start['rank']:02d}_s{seed}"
@@ -161,12 +166,8 @@ def main() -> None:
             rows.append(row)
             print(f"{run_dir.name}: {start['exact']:.4f} -> {summary['exact_final_tree']:.4f} "
                   f"(kept {summary['exact_best_tree']:.4f}) {row['seconds']:.1f} s", flush=True)
-            settings = {"starts": len(chosen), "starts_chosen": args.starts, "seeds": list(range(args.seeds)),
-                        "steps": args.steps, "finished_runs": f"{len(rows)} of {len(chosen) * args.seeds}"}
-            write(rows, ceiling, settings, args.out, command)
-    settings = {"starts": len(chosen), "starts_chosen": args.starts, "seeds": list(range(args.seeds)),
-                "steps": args.steps, "finished_runs": f"{len(rows)} of {len(chosen) * args.seeds}"}
-    print(write(rows, ceiling, settings, args.out, command).read_text())
+            write(rows, ceiling, settings(), args.out, command)
+    print(write(rows, ceiling, settings(), args.out, command).read_text())
 
 
 if __name__ == "__main__":

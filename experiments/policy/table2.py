@@ -212,7 +212,7 @@ def policy_probe(domain: str, method: str) -> Optional[Callable]:
 
 
 def parse_knobs(pairs: list[str]) -> dict:
-    """``["ddt_crisp=true", "leaf_mass=0.9"]`` -> ``{"ddt_crisp": True, "leaf_mass": 0.9}``, each
+    """``["leaf_temperature_end=0.1", "train_envs=8"]`` -> ``{"leaf_temperature_end": 0.1, "train_envs": 8}``, each
     value typed as TOML reads it and each key a field of ``spec.Knobs``; ValueError otherwise."""
     import tomllib
 

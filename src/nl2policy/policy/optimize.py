@@ -294,15 +294,22 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
     write_curve(episodes, window, out, f"{domain}: PPO from the tree-initialized DDT (seed {seed})")
     n = eval_episodes or knobs.eval_episodes
     rolling = rolling_mean([r for _, r in episodes], window)
+    returns: dict[Tree, float] = {}  # the final, kept and last trees are often one tree: evaluate it once
+
+    def mean_return(t: Tree) -> float:
+        if t not in returns:
+            returns[t] = evaluate(domain, tree_act_fn(domain, t), n, EVAL_SEED).mean_return
+        return returns[t]
+
     summary = {
         "domain": domain, "seed": seed, "steps": int(model.num_timesteps), "seconds": round(seconds, 2),
         "trained_on": d.train_env_id if simulator == "fast" and d.train_env_id else d.env_id,
         "evaluated_on": d.env_id, "eval_episodes": n, "eval_seed": EVAL_SEED, "returned": returned,
         "initial_mean_return": evaluate(domain, tree_policy(domain, tree), n, EVAL_SEED).mean_return,
-        "final_mean_return": evaluate(domain, tree_act_fn(domain, final_tree), n, EVAL_SEED).mean_return,
+        "final_mean_return": mean_return(final_tree),
         # the tree PPO handed back before any polish (keep-best), on the same episodes
-        "kept_mean_return": evaluate(domain, tree_act_fn(domain, kept), n, EVAL_SEED).mean_return,
-        "last_tree_mean_return": evaluate(domain, tree_act_fn(domain, last_tree), n, EVAL_SEED).mean_return,
+        "kept_mean_return": mean_return(kept),
+        "last_tree_mean_return": mean_return(last_tree),
         "final_soft_ddt_return": evaluate(domain, soft_act_fn(model, deterministic=False), n, EVAL_SEED).mean_return,
         "final_tree_has_raw_tests": has_raw_tests(final_tree),
         "training_episodes": len(episodes), "rolling_window": window,
