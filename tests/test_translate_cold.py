@@ -43,14 +43,23 @@ def test_saved_forward_is_the_traced_forward_bit_for_bit(one_torch_thread):
             assert torch.equal(loaded(ids), traced(ids)) and torch.equal(built(ids), traced(ids)), n
 
 
-def test_a_damaged_saved_forward_is_rebuilt(one_torch_thread):
+def test_a_damaged_saved_forward_is_rebuilt(one_torch_thread, tmp_path, monkeypatch):
     from nl2policy.language.models import pretrained
 
     pretrained.saved_forward(2)
+    # damage a copy in a data folder of this test's own: the user's is shared with every other
+    # test process (pytest-xdist), whose translations would load the damaged file meanwhile
+    shared = pretrained.saved_forward_path(2)
+    monkeypatch.setenv("NL2POLICY_HOME", str(tmp_path))
     path = pretrained.saved_forward_path(2)
+    assert path != shared
+    path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(b"not a torchscript file")
     pretrained.saved_forward.cache_clear()
-    pretrained.saved_forward(2)
+    try:
+        pretrained.saved_forward(2)
+    finally:
+        pretrained.saved_forward.cache_clear()  # later tests load the user's file again
     import torch
 
     torch.jit.load(str(path))  # rewritten whole
