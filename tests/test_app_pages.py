@@ -39,7 +39,8 @@ SUMMARY = {"steps": 2048, "seconds": 10.0, "eval_episodes": 200, "initial_mean_r
     (SUMMARY, [], "did not change: in 2,048 steps training found no better tree"),
     ({**SUMMARY, "exact_initial_tree": 5.0, "exact_final_tree": 5.0, "exact_best_tree": 6.0, "best_tree_step": 1024}, [],
      "at step 1024 training passed a better one"),
-    ({**SUMMARY, "final_tree_has_raw_tests": True}, [], "raw threshold test"),
+    ({**SUMMARY, "final_tree_has_raw_tests": True, "final_mean_return": 7.5}, [1],
+     "found a better tree: 1 node(s) changed (in yellow). Training also moved a question's threshold"),
 ])
 def test_result_is_readable_and_says_why(summary, changed, words):
     r = outcome.result(summary, changed)

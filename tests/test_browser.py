@@ -357,3 +357,31 @@ def test_a_page_on_another_origin_cannot_change_runs(server, browser):
     time.sleep(1)
     assert [(r["id"], r["status"]) for r in req("GET", "/api/runs")] == before
     req("POST", f"/api/runs/{going['id']}/cancel")
+
+
+def test_a_learned_threshold_reads_in_units_and_stays_in_the_editor(server, browser):
+    """A tree handed back with a learned test (raw:gap_behind<0.2281) opens on the Specify page:
+    the box reads in metres, the editor offers it as the slot's current question, and an edit
+    elsewhere keeps it."""
+    import httpx
+
+    url, _ = server
+    grid = ["raw:gap_behind<0.2281", "slower", "car_ahead_close", None, None, "slower", "idle"] + [None] * 8
+    made = httpx.post(url + "/api/translate", json={"domain": "highway", "description": "Slow down when a car is close ahead."},
+                      timeout=120).json()
+    stored = httpx.put(f"{url}/api/specs/{made['spec_id']}", json={"domain": "highway", "grid": grid}, timeout=30)
+    assert stored.status_code == 200, stored.text
+    page = browser.new_page(viewport={"width": 1100, "height": 900})
+    page.goto(f"{url}/?spec={made['spec_id']}")
+    page.wait_for_selector("#tree svg g[data-slot='0']")
+    assert "less than 22.8 m" in page.inner_text("#tree")
+    page.click("#tree g[data-slot='0']")
+    assert page.locator("#edit-choice option:checked").inner_text() == \
+        "Is the gap to the car behind in my lane less than 22.8 m?"
+    page.click("#tree g[data-slot='1']")
+    assert "the “yes” answer to “Is the gap to the car behind in my lane less than 22.8 m?”" in page.inner_text("#edit-place")
+    page.select_option("#edit-choice", "faster")
+    page.click("#apply-edit")
+    page.wait_for_function("document.querySelector('#tree g[data-slot=\"1\"]').dataset.id === 'faster'")
+    assert page.locator("#tree g[data-slot='0']").get_attribute("data-id") == "raw:gap_behind<0.2281"
+    assert page.inner_text("#edit-error") == ""

@@ -53,9 +53,12 @@ def result(summary: Optional[dict], changed: list[int]) -> Optional[dict[str, An
 
 def verdict(summary: dict, changed: list[int], before: float, after: float) -> str:
     steps = summary.get("steps")
-    if summary.get("final_tree_has_raw_tests"):
-        return ("Training changed a question into a raw threshold test that no question of the domain asks, "
-                "so the new tree is shown as JSON.")
+    learned = (" Training also moved a question's threshold to a value no question of the domain asks; that "
+               "question is shown with its new value.") if summary.get("final_tree_has_raw_tests") else ""
+    return _verdict(summary, changed, before, after, steps) + learned
+
+
+def _verdict(summary: dict, changed: list[int], before: float, after: float, steps: Optional[int]) -> str:
     if changed:
         if after > before + SAME:
             return f"Training found a better tree: {len(changed)} node(s) changed (in yellow)."

@@ -9,7 +9,7 @@ from nl2policy.trees import Vocabulary
 
 
 def _words(vocab: Vocabulary, item: Optional[str]) -> str:
-    return vocab.questions.get(item or "") or vocab.actions.get(item or "") or (item or "an empty box")
+    return vocab.wording(item) if item else "an empty box"
 
 
 def slot_place(slot: int, grid: list, vocab: Vocabulary) -> str:

@@ -4,6 +4,8 @@ three pages (Specify, Optimize, Collect) served as static HTML + JS that call it
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 import shutil
 import sqlite3
@@ -138,8 +140,11 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
     # --- domains ----------------------------------------------------------------------------
     @app.get("/api/domains")
     def domains() -> dict:
+        # "units": how a learned test on each feature reads (trees/raw.py), for the pages' labels
         return {name: {"title": get_domain(name).title, "questions": dict(get_domain(name).vocab.questions),
-                       "actions": dict(get_domain(name).vocab.actions)} for name in DOMAINS}
+                       "actions": dict(get_domain(name).vocab.actions),
+                       "units": {f: dataclasses.asdict(u) for f, u in get_domain(name).vocab.features.items()}}
+                for name in DOMAINS}
 
     @app.get("/api/briefing/{domain}")
     def briefing(domain: str) -> dict:

@@ -25,7 +25,7 @@ from typing import Any, Callable, Mapping, Optional, Protocol, Sequence
 
 import numpy as np
 
-from nl2policy.trees import Leaf, Tree, TreeError, Vocabulary, parse_tree
+from nl2policy.trees import FeatureUnit, Leaf, Node, Tree, TreeError, Vocabulary, parse_raw, parse_tree
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,14 @@ class Knobs:
     select_episodes: Optional[int] = None  # fast-env episodes for keep-best's sampled score of a tree
     polish_screen_episodes: Optional[int] = None  # fast-env episodes a sampled polish screens each neighbour on
     leaf_temperature_end: float = 1.0  # DDT leaf softmax temperature at the end of training, annealed from 1
+    node_sharpness_end: float = 1.0  # multiple of ddt_gamma at the end of training, on a line from 1
+    node_sharpness_from: float = 0.0  # fraction of the run after which that line starts (before it: 1)
+
+    def __post_init__(self) -> None:
+        if not (self.leaf_temperature_end > 0 and self.node_sharpness_end > 0 and 0 <= self.node_sharpness_from < 1):
+            raise ValueError("knobs: leaf_temperature_end and node_sharpness_end must be > 0 and node_sharpness_from "
+                             f"in [0, 1); got {self.leaf_temperature_end}, {self.node_sharpness_end}, "
+                             f"{self.node_sharpness_from}")
 
 
 Act = Callable[[np.ndarray], int]
@@ -173,19 +181,55 @@ class Domain:
         return self.actions.index(action)
 
     def tree_action(self, tree: Tree, x: np.ndarray) -> int:
-        """The action index a lexical tree picks for feature vector `x`."""
-        return self.action_index(tree.act(self.answers(x)))
+        """The action index a lexical tree picks for feature vector `x` (raw tests included);
+        one walk down the tree, since rollouts and the exact model call it once a state."""
+        x = np.asarray(x, dtype=np.float64).reshape(-1)
+        answers = self.answer_matrix(x)[0]
+        node = tree
+        while isinstance(node, Node):
+            if node.question in self.questions:
+                yes = answers[self.questions.index(node.question)]
+            else:
+                w, c = self.question_test(node.question)
+                yes = float(w @ x) > c
+            node = node.yes if yes else node.no
+        return self.action_index(node.action)
 
     def tree_actions(self, tree: Tree, x: np.ndarray) -> np.ndarray:
-        """The action index a lexical tree picks for each row of a batch of feature vectors."""
+        """The action index a lexical tree picks for each row of a batch of feature vectors; a
+        learned test (``raw:<feature><op><value>``) answers on its feature."""
+        x = np.atleast_2d(np.asarray(x, dtype=np.float64))
         answers = self.answer_matrix(x)
+
+        def column(question: str) -> np.ndarray:
+            if question in self.questions:
+                return answers[:, self.questions.index(question)]
+            raw = parse_raw(question)
+            if raw is None or raw.feature not in self.features:
+                raise ValueError(f"{self.name} has no question {question!r}")
+            xf = x[:, self.features.index(raw.feature)]
+            return xf > raw.value if raw.greater else xf < raw.value
 
         def act(node: Tree) -> np.ndarray:
             if isinstance(node, Leaf):
                 return np.full(len(answers), self.action_index(node.action), dtype=np.int64)
-            return np.where(answers[:, self.questions.index(node.question)], act(node.yes), act(node.no))
+            return np.where(column(node.question), act(node.yes), act(node.no))
 
         return act(tree)
+
+    def question_test(self, question: str) -> tuple[np.ndarray, float]:
+        """(weights over the features, threshold) of a question or a learned test: "yes" when
+        weights . x > threshold (``raw:f<v`` is -x_f > -v)."""
+        if question in self.questions:
+            i = self.questions.index(question)
+            return self.weights[i], float(self.thresholds[i])
+        raw = parse_raw(question)
+        if raw is None or raw.feature not in self.features:
+            raise ValueError(f"{self.name} has no question {question!r}")
+        sign = 1.0 if raw.greater else -1.0
+        w = np.zeros(len(self.features))
+        w[self.features.index(raw.feature)] = sign
+        return w, sign * raw.value
 
     def is_possible(self, answers: Mapping[str, bool]) -> bool:
         return not any(all(answers[q] == v for q, v in rule.items()) for rule in self.impossible)
@@ -240,8 +284,8 @@ def load_domain(folder: Path, package: str, spec: Optional[dict] = None) -> Doma
     for table in ("questions", "actions", "tests"):
         if not spec.get(table):
             raise ValueError(f"{where}: no [{table}] table")
-    vocab = Vocabulary(name, dict(spec["questions"]), dict(spec["actions"]))
     features: Sequence[str] = spec["features"]
+    vocab = Vocabulary(name, dict(spec["questions"]), dict(spec["actions"]), _units(spec, features, where))
     tests = spec["tests"]
     missing = set(vocab.questions) ^ set(tests)
     if missing:
@@ -276,6 +320,23 @@ def load_domain(folder: Path, package: str, spec: Optional[dict] = None) -> Doma
                   ceilings=spec.get("ceilings"), reference=spec.get("reference"),
                   translator=dict(spec.get("translator", {})),
                   ranges=tuple((float(ranges[f][0]), float(ranges[f][1])) for f in features) if ranges else ())
+
+
+def _units(spec: dict, features: Sequence[str], where: str) -> dict[str, FeatureUnit]:
+    """How each feature reads in a learned threshold test (trees/raw.py), from the optional
+    [units] table: ``gap_ahead = { name = "the gap ...", scale = 100, unit = "m" }``; a feature
+    it leaves out reads by its id, in feature units."""
+    table = spec.get("units", {})
+    unknown = set(table) - set(features)
+    if unknown:
+        raise ValueError(f"{where}: [units] names unknown features {sorted(unknown)}")
+    out = {}
+    for f in features:
+        entry = table.get(f, {})
+        if not isinstance(entry, dict) or set(entry) - {"name", "scale", "unit"}:
+            raise ValueError(f"{where}: [units] {f}: give {{ name = ..., scale = ..., unit = ... }}")
+        out[f] = FeatureUnit(str(entry.get("name", f)), float(entry.get("scale", 1.0)), str(entry.get("unit", "")))
+    return out
 
 
 def _knobs(spec: dict, file: str) -> Knobs:

@@ -55,10 +55,8 @@ def optimize(
             fail(str(exc))
     console.print("[bold]before[/]\n" + to_text(parsed, d.vocab))
     final = json.loads((out / "final_tree.json").read_text())
-    if summary["final_tree_has_raw_tests"]:
-        console.print(f"[bold]after[/] ({summary['returned']}; has raw threshold tests)\n" + json.dumps(final, indent=2))
-    else:
-        console.print(f"[bold]after[/] ({summary['returned']})\n" + to_text(parse_tree(final, d.vocab), d.vocab))
+    learned = "; a learned threshold, in the domain's units" if summary["final_tree_has_raw_tests"] else ""
+    console.print(f"[bold]after[/] ({summary['returned']}{learned})\n" + to_text(parse_tree(final, d.vocab), d.vocab))
     print(json.dumps(summary))
 
 

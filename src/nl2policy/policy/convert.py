@@ -34,8 +34,7 @@ from nl2policy.domains import get_domain
 from nl2policy.domains.spec import Domain, Knobs
 from nl2policy.policy.ddt import DDT, Shape
 from nl2policy.trees import MAX_DEPTH, Leaf, Node, Tree
-
-RAW_PREFIX = "raw:"
+from nl2policy.trees.raw import RAW_PREFIX, RawTest
 
 
 def pad_tree(tree: Tree, domain: Domain, depth: int = MAX_DEPTH) -> Tree:
@@ -89,14 +88,14 @@ def tree_to_ddt(domain_name: str, tree: Tree, pad: bool = False, gamma: Optional
     shape, questions, actions = _shape_and_tests(tree)
     n_actions = len(domain.actions)
     ddt = DDT(shape, len(domain.features), n_actions, knobs.ddt_gamma if gamma is None else gamma)
-    rows = [domain.questions.index(q) for q in questions]
+    tests = [domain.question_test(q) for q in questions]  # dictionary questions and learned (raw) tests
     other = math.log((1.0 - leaf_mass) / (n_actions - 1))
     logits = torch.full((shape.leaves, n_actions), other)
     for leaf, action in enumerate(actions):
         logits[leaf, domain.action_index(action)] = math.log(leaf_mass)
     with torch.no_grad():
-        ddt.weights.copy_(torch.as_tensor(domain.weights[rows], dtype=torch.float32).reshape(shape.nodes, -1))
-        ddt.comparators.copy_(torch.as_tensor(domain.thresholds[rows], dtype=torch.float32))
+        ddt.weights.copy_(torch.as_tensor(np.array([w for w, _ in tests]), dtype=torch.float32).reshape(shape.nodes, -1))
+        ddt.comparators.copy_(torch.as_tensor(np.array([c for _, c in tests]), dtype=torch.float32).reshape(shape.nodes))
         ddt.leaf_logits.copy_(logits)
     return ddt
 
@@ -145,7 +144,7 @@ def ddt_to_tree(domain_name: str, ddt: DDT, tolerance: Optional[float] = None) -
             return build(yes_branch if always_yes else no_branch, answered)
         best = min((cand for cand in candidates if cand[1] == f), key=lambda cand: abs(cand[3] - threshold), default=None)
         if best is None or abs(best[3] - threshold) > tol:
-            name = f"{RAW_PREFIX}{domain.features[f]}{'>' if greater else '<'}{threshold:.4f}"
+            name = RawTest(domain.features[f], bool(greater), float(threshold)).id
             return _join(name, build(yes_branch, answered), build(no_branch, answered))
         question, _, sign, _ = best
         swapped = (sign > 0) != greater
@@ -165,51 +164,16 @@ def _join(question: str, yes: Tree, no: Tree) -> Tree:
     return yes if yes == no else Node(question, yes, no)
 
 
-def _raw_answer(question: str, domain: Domain, x: np.ndarray) -> bool:
-    body = question[len(RAW_PREFIX):]
-    op = ">" if ">" in body else "<"
-    feature, value = body.split(op)
-    xf = float(x[domain.features.index(feature)])
-    return xf > float(value) if op == ">" else xf < float(value)
-
-
 def tree_act_fn(domain_name: str, tree: Tree) -> Callable[[np.ndarray], int]:
     """Act with a discretized tree, raw threshold tests included."""
     domain = get_domain(domain_name)
-
-    def act(x: np.ndarray) -> int:
-        answers = domain.answers(x)
-        node = tree
-        while isinstance(node, Node):
-            if node.question.startswith(RAW_PREFIX):
-                node = node.yes if _raw_answer(node.question, domain, x) else node.no
-            else:
-                node = node.yes if answers[node.question] else node.no
-        return domain.action_index(node.action)
-
-    return act
+    return lambda x: domain.tree_action(tree, x)
 
 
 def tree_batch_act_fn(domain_name: str, tree: Tree) -> Callable[[np.ndarray], np.ndarray]:
     """Act with a discretized tree on a batch of feature rows (n, features) -> (n,) indices."""
     domain = get_domain(domain_name)
-
-    def act(x: np.ndarray) -> np.ndarray:
-        x = np.atleast_2d(x)
-        answers = domain.answer_matrix(x)
-
-        def walk(node: Tree) -> np.ndarray:
-            if not isinstance(node, Node):
-                return np.full(len(x), domain.action_index(node.action), dtype=np.int64)
-            if node.question.startswith(RAW_PREFIX):
-                yes = np.array([_raw_answer(node.question, domain, row) for row in x], dtype=bool)
-            else:
-                yes = answers[:, domain.questions.index(node.question)]
-            return np.where(yes, walk(node.yes), walk(node.no))
-
-        return walk(tree)
-
-    return act
+    return lambda x: domain.tree_actions(tree, x)
 
 
 def has_raw_tests(tree: Tree) -> bool:

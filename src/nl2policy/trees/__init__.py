@@ -11,9 +11,10 @@ from nl2policy.trees.parse import parse_tree, tree_to_json, load_tree_arg
 from nl2policy.trees.tokens import to_tokens, from_tokens
 from nl2policy.trees.grid import to_grid, from_grid
 from nl2policy.trees.render import to_text, to_dot, to_svg
+from nl2policy.trees.raw import RAW_PREFIX, FeatureUnit, RawTest, parse_raw
 
 __all__ = [
     "Leaf", "Node", "Tree", "MAX_DEPTH", "GRID_SLOTS", "Vocabulary", "TreeError",
     "parse_tree", "tree_to_json", "load_tree_arg", "to_tokens", "from_tokens",
-    "to_grid", "from_grid", "to_text", "to_dot", "to_svg",
+    "to_grid", "from_grid", "to_text", "to_dot", "to_svg", "RAW_PREFIX", "FeatureUnit", "RawTest", "parse_raw",
 ]

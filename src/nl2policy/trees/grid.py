@@ -9,7 +9,8 @@ from __future__ import annotations
 from typing import Optional, Sequence
 
 from nl2policy.trees.errors import TreeError
-from nl2policy.trees.parse import validate
+from nl2policy.trees.parse import unknown_question, validate
+from nl2policy.trees.raw import RAW_PREFIX
 from nl2policy.trees.tree import GRID_SLOTS, Leaf, Node, Tree, Vocabulary
 
 Grid = list[Optional[str]]
@@ -46,8 +47,10 @@ def from_grid(grid: Sequence[Optional[str]], vocab: Vocabulary) -> Tree:
             raise TreeError("empty slot where a question's branch must go", f"slot {slot}")
         if item in vocab.actions:
             return Leaf(item)
-        if item in vocab.questions:
+        if vocab.is_question(item):
             return Node(item, build(2 * slot + 1), build(2 * slot + 2))
+        if isinstance(item, str) and item.startswith(RAW_PREFIX):
+            raise TreeError(unknown_question(item, vocab), f"slot {slot}")
         raise TreeError(f"unknown id {item!r}", f"slot {slot}")
 
     tree = build(0)

@@ -1,7 +1,8 @@
 """Reading and writing the corpus tree JSON, with validation that says where a tree is wrong.
 
-Format: ``{"do": ACTION}`` or ``{"if": QUESTION, "yes": TREE, "no": TREE}``. Rules checked
-here (the corpus README's): ids belong to the domain, at most 3 questions on a path, no
+Format: ``{"do": ACTION}`` or ``{"if": QUESTION, "yes": TREE, "no": TREE}``; a QUESTION is a
+dictionary id or a learned threshold test on one of the domain's features (``raw:gap_ahead<0.2281``,
+trees/raw.py). Rules checked here (the corpus README's): ids belong to the domain, at most 3 questions on a path, no
 question repeated on a path, no question whose two branches are identical.
 """
 
@@ -12,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from nl2policy.trees.errors import TreeError
+from nl2policy.trees.raw import RAW_PREFIX
 from nl2policy.trees.tree import MAX_DEPTH, Leaf, Node, Tree, Vocabulary
 
 
@@ -45,8 +47,8 @@ def _build(obj: Any, vocab: Vocabulary, where: str, path_questions: tuple[str, .
         question = obj["if"]
         if not isinstance(question, str):
             raise TreeError("'if' must name a question id (a string)", where)
-        if question not in vocab.questions:
-            raise TreeError(f"unknown question {question!r} for {vocab.domain}; known: {', '.join(vocab.questions)}", where)
+        if not vocab.is_question(question):
+            raise TreeError(unknown_question(question, vocab), where)
         if question in path_questions:
             raise TreeError(f"question {question!r} is asked again on the same path", where)
         if len(path_questions) >= MAX_DEPTH:
@@ -67,6 +69,16 @@ def _build(obj: Any, vocab: Vocabulary, where: str, path_questions: tuple[str, .
     if "do" in keys:
         raise TreeError(f"leaf has unexpected keys {sorted(keys - {'do'})}", where)
     raise TreeError(f"expected key 'do' or 'if', got {sorted(keys) or 'an empty object'}", where)
+
+
+def unknown_question(question: str, vocab: Vocabulary) -> str:
+    """Why `question` is not one of `vocab`'s, and what would be."""
+    if question.startswith(RAW_PREFIX) and vocab.features:
+        hint = (f"a learned test reads raw:<feature>><value> or raw:<feature><<value>, with a feature of "
+                f"{vocab.domain}: {', '.join(vocab.features)}")
+    else:
+        hint = f"known: {', '.join(vocab.questions)}"
+    return f"unknown question {question!r} for {vocab.domain}; {hint}"
 
 
 def validate(tree: Tree, vocab: Vocabulary) -> Tree:

@@ -14,7 +14,7 @@ from nl2policy.trees.tree import GRID_SLOTS, Leaf, Node, Tree, Vocabulary
 def _label(item: str, vocab: Optional[Vocabulary]) -> str:
     if vocab is None:
         return item
-    return vocab.questions.get(item) or vocab.actions.get(item) or item
+    return vocab.wording(item)
 
 
 def to_text(tree: Tree, vocab: Optional[Vocabulary] = None) -> str:

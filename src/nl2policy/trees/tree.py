@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Iterator, Mapping, Union
+
+from nl2policy.trees.raw import FeatureUnit, parse_raw
 
 MAX_DEPTH = 3
 """Most questions on any root-to-leaf path: the paper's 4-level grid."""
@@ -22,11 +24,33 @@ class Vocabulary:
     domain: str
     questions: Mapping[str, str]
     actions: Mapping[str, str]
+    # The policy's input features and how each reads: a learned test on one of them
+    # (``raw:<feature><op><value>``, trees/raw.py) is a question too. Empty: no raw tests.
+    features: Mapping[str, FeatureUnit] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         clash = set(self.questions) & set(self.actions)
         if clash:
             raise ValueError(f"ids used as both question and action: {sorted(clash)}")
+
+    def is_question(self, item: str) -> bool:
+        """A dictionary question, or a raw threshold test on one of the features."""
+        if item in self.questions:
+            return True
+        raw = parse_raw(item)
+        return raw is not None and raw.feature in self.features
+
+    def wording(self, item: str) -> str:
+        """How a person reads an id: its dictionary wording, a raw test in the feature's units,
+        or the id itself where it is neither."""
+        if item in self.questions:
+            return self.questions[item]
+        if item in self.actions:
+            return self.actions[item]
+        raw = parse_raw(item)
+        if raw is not None and raw.feature in self.features:
+            return raw.wording(self.features[raw.feature])
+        return item
 
     @property
     def question_ids(self) -> list[str]:

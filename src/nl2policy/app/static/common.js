@@ -35,8 +35,22 @@ async function domains() {
   }
   return DOMAINS;
 }
-function isQuestion(domain, id) { return id && DOMAINS[domain].questions[id] !== undefined; }
-function label(domain, id) { return DOMAINS[domain].questions[id] || DOMAINS[domain].actions[id] || id; }
+// A learned test that no dictionary question names, "raw:gap_ahead<0.2281" (trees/raw.py), read
+// in the feature's units: "Is the gap to the car ahead in my lane less than 22.8 m?".
+function rawTest(domain, id) {
+  const m = /^raw:([A-Za-z_][A-Za-z0-9_]*)([<>])([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)$/.exec(id || "");
+  const unit = m && (DOMAINS[domain].units || {})[m[1]];
+  return unit ? {unit, greater: m[2] === ">", value: parseFloat(m[3])} : null;
+}
+function isQuestion(domain, id) { return !!id && (DOMAINS[domain].questions[id] !== undefined || rawTest(domain, id) !== null); }
+function label(domain, id) {
+  const raw = rawTest(domain, id);
+  if (raw) {
+    const amount = Number((raw.value * raw.unit.scale).toPrecision(3)) + (raw.unit.unit ? ` ${raw.unit.unit}` : "");
+    return `Is ${raw.unit.name} ${raw.greater ? "more" : "less"} than ${amount}?`;
+  }
+  return DOMAINS[domain].questions[id] || DOMAINS[domain].actions[id] || id;
+}
 
 // Markdown as formatted text (headings, paragraphs, lists, **bold**, *italic*, `code`): enough
 // for the corpus briefing, escaped first so nothing in it runs as HTML.
