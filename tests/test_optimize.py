@@ -110,7 +110,7 @@ def test_leaf_temperature_anneals_from_one_to_the_knob_and_only_sharpens_the_lea
     from nl2policy.domains import get_domain
     from nl2policy.policy.optimize import train_checkpointed
 
-    knobs = dataclasses.replace(get_domain("taxi").knobs, leaf_temperature_end=0.1)
+    knobs = dataclasses.replace(get_domain("taxi").knobs, leaf_temperature_end=0.1, node_sharpness_end=1.0)
     trained = train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, TREE, knobs=knobs), "taxi", 0, 2048,
                                  tmp_path / "annealed", checkpoints=4)
     ddt = actor_ddt(trained.model)
@@ -122,9 +122,39 @@ def test_leaf_temperature_anneals_from_one_to_the_knob_and_only_sharpens_the_lea
         assert torch.allclose(ddt(x).exp(), expected, atol=1e-6)
         plain = ddt.log_path_probs(x).exp() @ torch.softmax(ddt.leaf_logits, dim=-1)
         assert not torch.allclose(ddt(x).exp(), plain, atol=1e-3)
-    unchanged = train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, TREE), "taxi", 0, 1024, tmp_path / "plain",
-                                   checkpoints=2)
+    assert float(ddt.node_sharpness) == 1.0  # its own knob, off here
+    off = dataclasses.replace(knobs, leaf_temperature_end=1.0)
+    unchanged = train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, TREE, knobs=off), "taxi", 0, 1024,
+                                   tmp_path / "plain", checkpoints=2)
     assert float(actor_ddt(unchanged.model).leaf_temperature) == 1.0
+
+
+def test_node_sharpness_anneals_from_one_to_the_knob_and_multiplies_gamma(tmp_path):
+    """node_sharpness_end: the nodes' gamma is multiplied by a factor going up a line from 1,
+    starting node_sharpness_from of the way into the run, so the soft paths end near the crisp
+    tree's; out-of-range knobs are refused."""
+    import dataclasses
+
+    from nl2policy.domains import get_domain
+    from nl2policy.policy.optimize import train_checkpointed
+
+    base = get_domain("taxi").knobs
+    knobs = dataclasses.replace(base, leaf_temperature_end=1.0, node_sharpness_end=10.0, node_sharpness_from=0.0)
+    trained = train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, TREE, knobs=knobs), "taxi", 0, 2048,
+                                 tmp_path / "sharpened", checkpoints=4)
+    ddt = actor_ddt(trained.model)
+    assert float(ddt.node_sharpness) == pytest.approx(1 + (10 - 1) * 1536 / 2048)
+    assert float(ddt.leaf_temperature) == 1.0
+    late = dataclasses.replace(knobs, node_sharpness_from=0.5)  # the last rollout starts at 75 %: half of the line
+    ddt = actor_ddt(train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, TREE, knobs=late), "taxi", 0, 2048,
+                                       tmp_path / "late", checkpoints=4).model)
+    assert float(ddt.node_sharpness) == pytest.approx(1 + (10 - 1) * 0.5)
+    for bad in ({"node_sharpness_from": 1.0}, {"node_sharpness_end": 0.0}, {"leaf_temperature_end": -1.0}):
+        with pytest.raises(ValueError, match="knobs"):
+            dataclasses.replace(base, **bad)
+    x = torch.rand(64, len(get_domain("taxi").features))
+    with torch.no_grad():
+        assert torch.allclose(ddt.node_logits(x), ddt.gamma * float(ddt.node_sharpness) * (x @ ddt.weights.T - ddt.comparators))
 
 
 def test_actor_learning_rate_scale_survives_sb3s_schedule():
@@ -219,6 +249,35 @@ def test_polish_escapes_the_single_edit_optimum_by_larger_moves_that_keep_the_ro
     assert result.tree.question == "has_passenger" and result.value > value + 0.4
     assert result.value == pytest.approx(best_tree(d.exact.tables(), 3, roots=["has_passenger"]).value)
     assert d.exact.expected_return(tree_act_fn("taxi", result.tree)) == result.value
+
+
+def test_the_polish_also_climbs_from_the_start_where_ppo_moved_the_root_and_keeps_the_better_end(monkeypatch):
+    """A kept tree of taxi's never-worse grid (frequent #5, seed 1: PPO moved the root to
+    at_airport) climbs to 8.02 only; its start (root heavy_traffic) climbs higher. With an exact
+    model optimize climbs from both and keeps the better end, PPO's on a tie; highway's climb is
+    sampled and slow, so only PPO's tree is climbed there."""
+    import nl2policy.policy.polish as polish_module
+    from nl2policy.domains import get_domain
+    from nl2policy.policy.polish import Polished, polish, polish_kept
+
+    d = get_domain("taxi")
+    branch = {"if": "heavy_traffic", "yes": {"do": "go_village"}, "no": {"do": "go_city"}}
+    start = parse_tree(branch, d.vocab)
+    kept = parse_tree({"if": "at_airport", "yes": branch,
+                       "no": {"if": "has_passenger", "yes": {"do": "go_airport"}, "no": branch}}, d.vocab)
+    from_kept, from_start = polish("taxi", kept), polish("taxi", start)
+    assert from_start.value > from_kept.value + 0.3  # the case the rule is for
+    result, source = polish_kept("taxi", kept, start)
+    assert (source, result.tree, result.value) == ("start", from_start.tree, from_start.value)
+    assert polish_kept("taxi", from_start.tree, from_start.tree)[1] == "kept"  # nothing else to climb
+    assert polish_kept("taxi", from_start.tree, kept)[1] == "kept"  # a start that ends lower loses
+
+    climbed = []
+    monkeypatch.setattr(polish_module, "polish_sampled",
+                        lambda domain, tree: climbed.append(tree) or Polished(tree, 0.0, 0.0, 0, 0, 0.0))
+    hw = get_domain("highway")
+    faster, slower = parse_tree({"do": "faster"}, hw.vocab), parse_tree({"do": "slower"}, hw.vocab)
+    assert polish_kept("highway", faster, slower)[1] == "kept" and climbed == [faster]
 
 
 def test_sampled_polish_climbs_on_common_scenes_and_keeps_a_start_it_cannot_beat():

@@ -80,15 +80,21 @@ class DDT(nn.Module):
         self.weights = nn.Parameter(torch.zeros(shape.nodes, features))
         self.comparators = nn.Parameter(torch.zeros(shape.nodes))
         self.leaf_logits = nn.Parameter(torch.zeros(shape.leaves, actions))
-        # Leaf softmax temperature, set during training by optimize.LeafAnneal from 1 down to
+        # Leaf softmax temperature, set during training by optimize.Anneal from 1 down to
         # `anneal_to` (1: no annealing), so the soft policy PPO trains ends near the tree read
         # from it. Not saved: the schedule sets it again from the step count.
         self.register_buffer("leaf_temperature", torch.tensor(1.0), persistent=False)
         self.anneal_to = 1.0
+        # The same for the nodes: a multiple of gamma, from 1 up to `sharpen_to` on a line that
+        # starts `sharpen_from` of the way into the run, so that the soft policy's paths end
+        # near the crisp tree's too while PPO could still move its questions earlier on.
+        self.register_buffer("node_sharpness", torch.tensor(1.0), persistent=False)
+        self.sharpen_to, self.sharpen_from = 1.0, 0.0
 
     def node_logits(self, x: torch.Tensor) -> torch.Tensor:
-        """gamma * (w_n . x - c_n) for every node, shape (batch, nodes)."""
-        return self.gamma * (x @ self.weights.T - self.comparators)
+        """gamma * (w_n . x - c_n) for every node, shape (batch, nodes), times the annealing's
+        node sharpness (1 outside training with ``node_sharpness_end``)."""
+        return self.gamma * self.node_sharpness * (x @ self.weights.T - self.comparators)
 
     def log_path_probs(self, x: torch.Tensor) -> torch.Tensor:
         """log P(reach leaf l | x), shape (batch, leaves)."""

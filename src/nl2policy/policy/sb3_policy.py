@@ -121,7 +121,8 @@ def make_ppo(domain: str, method: str, seed: int, tree: Optional[Tree] = None, e
     settings = knobs.ppo.as_kwargs()
     actor = initial_actor(domain, method, seed, tree, knobs)
     if actor is not None:
-        actor.anneal_to = knobs.leaf_temperature_end
+        actor.anneal_to, actor.sharpen_to = knobs.leaf_temperature_end, knobs.node_sharpness_end
+        actor.sharpen_from = knobs.node_sharpness_from
     if actor is None:  # 3 fully connected layers in the actor: 64, 64, action head
         return TreePPO("MlpPolicy", env, policy_kwargs=dict(net_arch=dict(pi=[64, 64], vf=CRITIC)),
                        seed=seed, device="cpu", verbose=0, **settings)
