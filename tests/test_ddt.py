@@ -147,3 +147,20 @@ def test_discretization_prunes_a_question_the_path_already_answers():
     assert taxi.forced_answer({"at_airport": False, "at_city": False}, "at_village") is True
     assert taxi.forced_answer({"at_airport": False}, "at_village") is None
     assert taxi.forced_answer({}, "has_passenger") is None
+
+
+def test_a_ddt_pickled_before_the_annealing_buffers_loads_with_them_neutral():
+    """Checkpoints pickle the DDT in SB3's policy_kwargs; one saved before the annealing buffers
+    existed must still act (as it did) when a run resumes."""
+    import pickle
+
+    from nl2policy.policy.ddt import DDT, complete_shape
+
+    ddt = DDT(complete_shape(2), 3, 4, gamma=5.0)
+    x = torch.rand(8, 3)
+    before = ddt(x)
+    del ddt._buffers["node_sharpness"], ddt._buffers["leaf_temperature"]
+    del ddt.anneal_to, ddt.sharpen_to, ddt.sharpen_from
+    old = pickle.loads(pickle.dumps(ddt))
+    assert torch.allclose(old(x), before)
+    assert (old.anneal_to, old.sharpen_to, old.sharpen_from) == (1.0, 1.0, 0.0)

@@ -97,3 +97,21 @@ def test_the_app_lists_units_shows_and_edits_a_tree_with_learned_tests(tmp_path)
         bad = client.put(f"/api/specs/{spec['spec_id']}", json={"domain": "highway", "grid": ["raw:wheels<0.2"] + grid[1:]})
         assert bad.status_code == 422 and "raw:<feature>" in bad.text
         assert client.get(f"/api/specs/{spec['spec_id']}").json()["grid"] == grid  # the bad edit changed nothing
+
+
+@pytest.mark.parametrize("value,text", [(22.81, "22.8"), (1.125, "1.13"), (2.675, "2.67"), (-0.0, "0"), (0.0, "0"),
+                                        (24.000000000000004, "24"), (2e6, "2000000"), (100.0, "100"), (0.5, "0.5"),
+                                        (-3.14159, "-3.14")])
+def test_amounts_are_written_as_the_pages_javascript_writes_them(value, text):
+    """Number(v.toPrecision(3)) in the pages: 3 significant digits of the exact value, halves up,
+    no exponent at these sizes (the values are checked against what node printed for them)."""
+    from nl2policy.trees.raw import three_digits
+
+    assert three_digits(value) == text
+
+
+def test_an_id_is_stored_one_way_and_the_corpus_and_submissions_refuse_learned_tests(highway, tmp_path):
+    tree = parse_tree({"if": "raw:speed>0.6", "yes": {"do": "faster"}, "no": {"do": "idle"}}, highway.vocab)
+    assert tree.question == "raw:speed>0.6000"
+    with pytest.raises(TreeError, match="unknown question"):
+        parse_tree(LEARNED, highway.vocab.dictionary_only())

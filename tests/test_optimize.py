@@ -114,8 +114,12 @@ def test_leaf_temperature_anneals_from_one_to_the_knob_and_only_sharpens_the_lea
     trained = train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, TREE, knobs=knobs), "taxi", 0, 2048,
                                  tmp_path / "annealed", checkpoints=4)
     ddt = actor_ddt(trained.model)
-    # the last of 4 rollouts of 512 starts at step 1536: 1 + (0.1 - 1) * 1536 / 2048
-    assert float(ddt.leaf_temperature) == pytest.approx(1 + (0.1 - 1) * 1536 / 2048)
+    assert float(ddt.leaf_temperature) == pytest.approx(0.1)  # the schedule's end, where training ends
+    from nl2policy.policy.optimize import anneal
+
+    trained.model.num_timesteps = 512  # the second rollout's start: 1 + (0.1 - 1) * 512 / 2048
+    anneal(trained.model, 2048)
+    assert float(ddt.leaf_temperature) == pytest.approx(1 + (0.1 - 1) * 512 / 2048)
     x = torch.rand(64, len(get_domain("taxi").features))
     with torch.no_grad():  # the policy mixes the paths' leaves, each leaf's softmax taken at that temperature
         expected = ddt.log_path_probs(x).exp() @ torch.softmax(ddt.leaf_logits / ddt.leaf_temperature, dim=-1)
@@ -143,12 +147,19 @@ def test_node_sharpness_anneals_from_one_to_the_knob_and_multiplies_gamma(tmp_pa
     trained = train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, TREE, knobs=knobs), "taxi", 0, 2048,
                                  tmp_path / "sharpened", checkpoints=4)
     ddt = actor_ddt(trained.model)
+    assert float(ddt.node_sharpness) == pytest.approx(10.0) and float(ddt.leaf_temperature) == 1.0
+    from nl2policy.policy.optimize import anneal
+
+    trained.model.num_timesteps = 1536
+    anneal(trained.model, 2048)
     assert float(ddt.node_sharpness) == pytest.approx(1 + (10 - 1) * 1536 / 2048)
-    assert float(ddt.leaf_temperature) == 1.0
-    late = dataclasses.replace(knobs, node_sharpness_from=0.5)  # the last rollout starts at 75 %: half of the line
-    ddt = actor_ddt(train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, TREE, knobs=late), "taxi", 0, 2048,
-                                       tmp_path / "late", checkpoints=4).model)
-    assert float(ddt.node_sharpness) == pytest.approx(1 + (10 - 1) * 0.5)
+    late = dataclasses.replace(knobs, node_sharpness_from=0.5)
+    model = train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, TREE, knobs=late), "taxi", 0, 2048,
+                               tmp_path / "late", checkpoints=4).model
+    for step, expected in ((512, 1.0), (1024, 1.0), (1536, 1 + (10 - 1) * 0.5)):  # the line starts half way
+        model.num_timesteps = step
+        anneal(model, 2048)
+        assert float(actor_ddt(model).node_sharpness) == pytest.approx(expected)
     for bad in ({"node_sharpness_from": 1.0}, {"node_sharpness_end": 0.0}, {"leaf_temperature_end": -1.0}):
         with pytest.raises(ValueError, match="knobs"):
             dataclasses.replace(base, **bad)
@@ -269,7 +280,7 @@ def test_the_polish_also_climbs_from_the_start_where_ppo_moved_the_root_and_keep
     assert from_start.value > from_kept.value + 0.3  # the case the rule is for
     result, source = polish_kept("taxi", kept, start)
     assert (source, result.tree, result.value) == ("start", from_start.tree, from_start.value)
-    assert polish_kept("taxi", from_start.tree, from_start.tree)[1] == "kept"  # nothing else to climb
+    assert polish_kept("taxi", from_start.tree, start)[1] == "kept"  # a tie (both climbs end at the best) keeps PPO's
     assert polish_kept("taxi", from_start.tree, kept)[1] == "kept"  # a start that ends lower loses
 
     climbed = []

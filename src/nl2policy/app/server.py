@@ -70,14 +70,17 @@ def _domain(name: str):
     return get_domain(name)
 
 
-def _parse(domain: str, tree: Any = None, grid: Optional[list] = None):
+def _parse(domain: str, tree: Any = None, grid: Optional[list] = None, learned: bool = True):
+    """The request's tree; `learned`: whether learned tests (raw:...) may be in it (a tree a run
+    handed back may hold them; a description's tree for the corpus may not)."""
     d = _domain(domain)
+    vocab = d.vocab if learned else d.vocab.dictionary_only()
     try:
         if grid is not None:
-            return from_grid(grid, d.vocab)
+            return from_grid(grid, vocab)
         if tree is None:
             raise TreeError("give a tree or a grid", "request")
-        return parse_tree(tree, d.vocab)
+        return parse_tree(tree, vocab)
     except TreeError as exc:
         words = place(exc.where, d.vocab, tree=tree, grid=grid)
         raise HTTPException(422, {"message": exc.message, "where": exc.where, "place": words,
@@ -311,7 +314,7 @@ def create_app(db_path: Path, data_dir: Path, translator: Optional[Callable] = N
     # --- collect ----------------------------------------------------------------------------
     @app.post("/api/submissions", status_code=201)
     def submit(body: SubmissionIn) -> dict:
-        tree = _parse(body.domain, grid=body.grid)
+        tree = _parse(body.domain, grid=body.grid, learned=False)
         if not has_visible(body.writer):
             raise HTTPException(422, {"message": "give your name or a nickname (it has no visible characters)", "where": "writer"})
         if not has_visible(body.description):

@@ -335,7 +335,10 @@ def _units(spec: dict, features: Sequence[str], where: str) -> dict[str, Feature
         entry = table.get(f, {})
         if not isinstance(entry, dict) or set(entry) - {"name", "scale", "unit"}:
             raise ValueError(f"{where}: [units] {f}: give {{ name = ..., scale = ..., unit = ... }}")
-        out[f] = FeatureUnit(str(entry.get("name", f)), float(entry.get("scale", 1.0)), str(entry.get("unit", "")))
+        scale = entry.get("scale", 1.0)
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not scale > 0:
+            raise ValueError(f"{where}: [units] {f}: scale must be a number > 0, got {scale!r}")
+        out[f] = FeatureUnit(str(entry.get("name", f)), float(scale), str(entry.get("unit", "")))
     return out
 
 

@@ -57,7 +57,7 @@ def covered_domains(folder: Optional[Path] = None) -> set[str]:
 
 
 def _load_file(path: Path, domain: str, round_: int = 1) -> list[Spec]:
-    vocab = get_domain(domain).vocab
+    vocab = get_domain(domain).vocab.dictionary_only()  # a described tree asks dictionary questions only
     specs = []
     for lineno, line in enumerate(path.read_text().splitlines(), 1):
         if not line.strip():

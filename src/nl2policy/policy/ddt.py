@@ -91,6 +91,17 @@ class DDT(nn.Module):
         self.register_buffer("node_sharpness", torch.tensor(1.0), persistent=False)
         self.sharpen_to, self.sharpen_from = 1.0, 0.0
 
+    def __setstate__(self, state: dict) -> None:
+        # A DDT pickled before the annealing buffers existed (a checkpoint's policy_kwargs) loads
+        # with them at their neutral values, so old runs resume instead of failing.
+        super().__setstate__(state)
+        for name in ("leaf_temperature", "node_sharpness"):
+            if name not in self._buffers:
+                self.register_buffer(name, torch.tensor(1.0), persistent=False)
+        for name, value in (("anneal_to", 1.0), ("sharpen_to", 1.0), ("sharpen_from", 0.0)):
+            if not hasattr(self, name):
+                setattr(self, name, value)
+
     def node_logits(self, x: torch.Tensor) -> torch.Tensor:
         """gamma * (w_n . x - c_n) for every node, shape (batch, nodes), times the annealing's
         node sharpness (1 outside training with ``node_sharpness_end``)."""

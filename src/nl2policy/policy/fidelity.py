@@ -15,7 +15,7 @@ import torch
 
 from nl2policy.domains import get_domain, make_env
 from nl2policy.policy.convert import tree_to_ddt, ddt_to_tree
-from nl2policy.trees import Leaf, Tree
+from nl2policy.trees import Tree
 
 
 def env_states(domain: str, n: int, seed: int = 0) -> np.ndarray:
@@ -38,22 +38,8 @@ def uniform_states(domain: str, n: int, seed: int = 0) -> np.ndarray:
 
 
 def tree_actions_batch(domain: str, tree: Tree, states: np.ndarray) -> np.ndarray:
-    """The tree's action index for every state, by boolean masks down the tree (vectorized
-    ``Domain.tree_action``)."""
-    d = get_domain(domain)
-    answers = d.answer_matrix(states)
-    actions = np.full(len(states), -1)
-
-    def route(node: Tree, mask: np.ndarray) -> None:
-        if isinstance(node, Leaf):
-            actions[mask] = d.action_index(node.action)
-            return
-        yes = answers[:, d.questions.index(node.question)]
-        route(node.yes, mask & yes)
-        route(node.no, mask & ~yes)
-
-    route(tree, np.ones(len(states), dtype=bool))
-    return actions
+    """The tree's action index for every state (``Domain.tree_actions``: learned tests too)."""
+    return get_domain(domain).tree_actions(tree, states)
 
 
 def agreement(domain: str, tree: Tree, states: np.ndarray, pad: bool = False, gamma: float | None = None) -> float:

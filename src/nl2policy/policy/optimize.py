@@ -113,6 +113,21 @@ def checkpoint_tree_score(domain: str, sampled: bool = False,
     return score
 
 
+def anneal(model: PPO, total: int) -> None:
+    """Set the DDT's leaf temperature and node sharpness for the step `model` is at (see
+    ``Anneal``); also at the end of training and after loading, so that the soft policy scored
+    there is the same whether the run was resumed or not."""
+    ddt = getattr(model.policy, "action_net", None)
+    if not hasattr(ddt, "leaf_temperature"):
+        return  # the MLP
+    frac = min(1.0, model.num_timesteps / max(1, total))
+    if ddt.anneal_to != 1.0:
+        ddt.leaf_temperature.fill_(1.0 + (ddt.anneal_to - 1.0) * frac)
+    if ddt.sharpen_to != 1.0:
+        start = ddt.sharpen_from
+        ddt.node_sharpness.fill_(1.0 + (ddt.sharpen_to - 1.0) * max(0.0, (frac - start) / max(1e-9, 1.0 - start)))
+
+
 class Anneal(BaseCallback):
     """Before each rollout, set the DDT's leaf temperature on a line from 1 at step 0 to its
     ``anneal_to`` at `total` steps, and its node sharpness from 1 to its ``sharpen_to`` on a line
@@ -128,14 +143,7 @@ class Anneal(BaseCallback):
         self.total = total
 
     def _on_rollout_start(self) -> None:
-        ddt = getattr(self.model.policy, "action_net", None)
-        frac = min(1.0, self.model.num_timesteps / max(1, self.total))
-        leaf_end, node_end = getattr(ddt, "anneal_to", 1.0), getattr(ddt, "sharpen_to", 1.0)
-        if leaf_end != 1.0:
-            ddt.leaf_temperature.fill_(1.0 + (leaf_end - 1.0) * frac)
-        if node_end != 1.0:
-            start = ddt.sharpen_from
-            ddt.node_sharpness.fill_(1.0 + (node_end - 1.0) * max(0.0, (frac - start) / max(1e-9, 1.0 - start)))
+        anneal(self.model, self.total)
 
     def _on_step(self) -> bool:
         return True
@@ -219,6 +227,7 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
         state = {"steps": int(model.num_timesteps), "seconds": seconds, "chunks": chunks, "episodes": episodes,
                  "best_tree": best, "last_tree": last, "probes": probes, "simulator": trained_on}
         _write_atomically(state_path, lambda path: path.write_text(json.dumps(state)))
+    anneal(model, total)  # the end of the schedule (or, resumed, where the run stood)
     if progress:
         progress(total, total)
     return Trained(model, episodes, seconds, best, probes, last)

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from nl2policy.trees.errors import TreeError
-from nl2policy.trees.raw import RAW_PREFIX
+from nl2policy.trees.raw import RAW_PREFIX, parse_raw
 from nl2policy.trees.tree import MAX_DEPTH, Leaf, Node, Tree, Vocabulary
 
 
@@ -49,6 +49,8 @@ def _build(obj: Any, vocab: Vocabulary, where: str, path_questions: tuple[str, .
             raise TreeError("'if' must name a question id (a string)", where)
         if not vocab.is_question(question):
             raise TreeError(unknown_question(question, vocab), where)
+        if question.startswith(RAW_PREFIX):  # one id per test: "raw:speed>0.6" is "raw:speed>0.6000"
+            question = parse_raw(question).id
         if question in path_questions:
             raise TreeError(f"question {question!r} is asked again on the same path", where)
         if len(path_questions) >= MAX_DEPTH:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import re
+from decimal import ROUND_HALF_UP, Decimal
 from dataclasses import dataclass
 from typing import Optional
 
@@ -46,8 +47,19 @@ class RawTest:
 
     def wording(self, unit: Optional[FeatureUnit] = None) -> str:
         unit = unit or FeatureUnit(self.feature)
-        amount = format(float(f"{self.value * unit.scale:.3g}"), "g") + (f" {unit.unit}" if unit.unit else "")
+        amount = three_digits(self.value * unit.scale) + (f" {unit.unit}" if unit.unit else "")
         return f"Is {unit.name} {'more' if self.greater else 'less'} than {amount}?"
+
+
+def three_digits(value: float) -> str:
+    """`value` to 3 significant digits, halves rounded up on the exact binary value and no
+    exponent: what the pages' JavaScript writes (Number(v.toPrecision(3))) for such values."""
+    exact = Decimal(value + 0.0)  # + 0.0: no "-0"
+    if exact == 0:
+        return "0"
+    rounded = exact.quantize(Decimal(1).scaleb(exact.adjusted() - 2), rounding=ROUND_HALF_UP)
+    text = format(rounded, "f")
+    return text.rstrip("0").rstrip(".") if "." in text else text
 
 
 def is_raw(question: str) -> bool:

@@ -33,6 +33,10 @@ class Vocabulary:
         if clash:
             raise ValueError(f"ids used as both question and action: {sorted(clash)}")
 
+    def dictionary_only(self) -> "Vocabulary":
+        """The same ids without learned tests: what a person writes and the corpus holds."""
+        return Vocabulary(self.domain, self.questions, self.actions)
+
     def is_question(self, item: str) -> bool:
         """A dictionary question, or a raw threshold test on one of the features."""
         if item in self.questions:

@@ -46,7 +46,8 @@ function isQuestion(domain, id) { return !!id && (DOMAINS[domain].questions[id] 
 function label(domain, id) {
   const raw = rawTest(domain, id);
   if (raw) {
-    const amount = Number((raw.value * raw.unit.scale).toPrecision(3)) + (raw.unit.unit ? ` ${raw.unit.unit}` : "");
+    // 3 significant digits, halves up, no exponent: trees/raw.py's three_digits writes the same
+    const amount = String(Number((raw.value * raw.unit.scale).toPrecision(3))) + (raw.unit.unit ? ` ${raw.unit.unit}` : "");
     return `Is ${raw.unit.name} ${raw.greater ? "more" : "less"} than ${amount}?`;
   }
   return DOMAINS[domain].questions[id] || DOMAINS[domain].actions[id] || id;
