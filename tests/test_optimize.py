@@ -336,3 +336,25 @@ def test_a_checkpoint_from_before_keep_best_resumes(tmp_path):
     summary = optimize_tree("taxi", TREE, steps=1024, seed=0, out=tmp_path, eval_episodes=2, polish=False)
     assert summary["steps"] == 1024 and summary["keep_best"]["best_checkpoint_step"] >= 512
     assert summary["exact_final_tree"] >= summary["exact_initial_tree"]
+
+
+def test_a_tree_ddt_can_keep_its_questions_features_and_learn_thresholds_and_leaves(tmp_path):
+    """learn_node_features = False: the nodes' weights do not move, comparators and leaves do;
+    a resumed run keeps the setting; the random DDT is not affected."""
+    import dataclasses
+
+    from nl2policy.domains import get_domain
+    from nl2policy.policy.optimize import train_checkpointed
+
+    knobs = dataclasses.replace(get_domain("highway").knobs, learn_node_features=False, train_envs=2)
+    tree = get_domain("highway").example_tree
+    factory = lambda: make_ppo("highway", "tree_ddt", 0, tree, knobs=knobs)
+    start = actor_ddt(factory())
+    w0, c0, l0 = start.weights.detach().clone(), start.comparators.detach().clone(), start.leaf_logits.detach().clone()
+    trained = train_checkpointed(factory, "highway", 0, 1024, tmp_path / "run", checkpoints=2)
+    ddt = actor_ddt(trained.model)
+    assert torch.equal(ddt.weights.detach(), w0) and not ddt.weights.requires_grad
+    assert not torch.equal(ddt.leaf_logits.detach(), l0) or not torch.equal(ddt.comparators.detach(), c0)
+    resumed = train_checkpointed(factory, "highway", 0, 2048, tmp_path / "run", checkpoints=2)
+    assert torch.equal(actor_ddt(resumed.model).weights.detach(), w0)
+    assert actor_ddt(make_ppo("highway", "random_ddt", 0, knobs=knobs)).weights.requires_grad

@@ -62,6 +62,7 @@ class Knobs:
     leaf_temperature_end: float = 1.0  # DDT leaf softmax temperature at the end of training, annealed from 1
     node_sharpness_end: float = 1.0  # multiple of ddt_gamma at the end of training, on a line from 1
     node_sharpness_from: float = 0.0  # fraction of the run after which that line starts (before it: 1)
+    learn_node_features: bool = True  # False: a tree-initialized DDT's node weights stay; thresholds and leaves learn
 
     def __post_init__(self) -> None:
         if not (self.leaf_temperature_end > 0 and self.node_sharpness_end > 0 and 0 <= self.node_sharpness_from < 1):

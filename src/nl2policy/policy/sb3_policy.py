@@ -123,6 +123,11 @@ def make_ppo(domain: str, method: str, seed: int, tree: Optional[Tree] = None, e
     if actor is not None:
         actor.anneal_to, actor.sharpen_to = knobs.leaf_temperature_end, knobs.node_sharpness_end
         actor.sharpen_from = knobs.node_sharpness_from
+        if method == "tree_ddt" and not knobs.learn_node_features:
+            # each node keeps the feature its question tests (a readable test: the question, or a
+            # threshold on its feature); only comparators and leaves learn. The flag travels with
+            # the pickled DDT, so a resumed run keeps it; Adam skips a parameter with no gradient.
+            actor.weights.requires_grad_(False)
     if actor is None:  # 3 fully connected layers in the actor: 64, 64, action head
         return TreePPO("MlpPolicy", env, policy_kwargs=dict(net_arch=dict(pi=[64, 64], vf=CRITIC)),
                        seed=seed, device="cpu", verbose=0, **settings)
