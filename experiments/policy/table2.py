@@ -33,7 +33,7 @@ from nl2policy.language.corpus import load_corpus
 from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn, tree_batch_act_fn
 from nl2policy.policy.keep_best import tree_from_json, tree_scorer
 from nl2policy.policy.optimize import EVAL_SEED, checkpoint_tree_score, rolling_mean, train_checkpointed, write_curve
-from nl2policy.policy.polish import can_polish, polish_any, polish_kept
+from nl2policy.policy.polish import can_polish, polish_kept
 from nl2policy.policy.rollout import evaluate, evaluate_batched, evaluate_batched_many, reference_batch_act, tree_policy
 from nl2policy.policy.sb3_policy import METHODS, action_probs_fn, actor_ddt, make_ppo, soft_act_fn
 from nl2policy.trees import parse_tree, tree_to_json
@@ -275,7 +275,7 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
         kept = tree_from_json(best["tree"])
         if polish and can_polish(domain) and not has_raw_tests(kept):
             # as optimize polishes: with an exact model, the climb from the start tree too
-            polished, source = polish_kept(domain, kept, tree) if tree is not None else (polish_any(domain, kept), "kept")
+            polished, source = polish_kept(domain, kept, tree)
             result.update({"polished_tree": tree_to_json(polished.tree), "polished_score": polished.value,
                            "polished_from": source, "polish_seconds": polished.seconds})
         result["scored_by"] = rule

@@ -5,7 +5,6 @@ three pages (Specify, Optimize, Collect) served as static HTML + JS that call it
 from __future__ import annotations
 
 import dataclasses
-
 import json
 import shutil
 import sqlite3

@@ -181,48 +181,39 @@ class Domain:
     def action_index(self, action: str) -> int:
         return self.actions.index(action)
 
+    @cached_property
+    def question_index(self) -> dict[str, int]:
+        """Question id -> its row in `weights` / `thresholds` (tree walks look it up per node)."""
+        return {q: i for i, q in enumerate(self.questions)}
+
     def tree_action(self, tree: Tree, x: np.ndarray) -> int:
         """The action index a lexical tree picks for feature vector `x` (raw tests included);
         one walk down the tree, since rollouts and the exact model call it once a state."""
         x = np.asarray(x, dtype=np.float64).reshape(-1)
-        answers = self.answer_matrix(x)[0]
         node = tree
         while isinstance(node, Node):
-            if node.question in self.questions:
-                yes = answers[self.questions.index(node.question)]
-            else:
-                w, c = self.question_test(node.question)
-                yes = float(w @ x) > c
-            node = node.yes if yes else node.no
+            w, c = self.question_test(node.question)
+            node = node.yes if float(w @ x) > c else node.no
         return self.action_index(node.action)
 
     def tree_actions(self, tree: Tree, x: np.ndarray) -> np.ndarray:
         """The action index a lexical tree picks for each row of a batch of feature vectors; a
         learned test (``raw:<feature><op><value>``) answers on its feature."""
         x = np.atleast_2d(np.asarray(x, dtype=np.float64))
-        answers = self.answer_matrix(x)
-
-        def column(question: str) -> np.ndarray:
-            if question in self.questions:
-                return answers[:, self.questions.index(question)]
-            raw = parse_raw(question)
-            if raw is None or raw.feature not in self.features:
-                raise ValueError(f"{self.name} has no question {question!r}")
-            xf = x[:, self.features.index(raw.feature)]
-            return xf > raw.value if raw.greater else xf < raw.value
 
         def act(node: Tree) -> np.ndarray:
             if isinstance(node, Leaf):
-                return np.full(len(answers), self.action_index(node.action), dtype=np.int64)
-            return np.where(column(node.question), act(node.yes), act(node.no))
+                return np.full(len(x), self.action_index(node.action), dtype=np.int64)
+            w, c = self.question_test(node.question)
+            return np.where(x @ w > c, act(node.yes), act(node.no))
 
         return act(tree)
 
     def question_test(self, question: str) -> tuple[np.ndarray, float]:
         """(weights over the features, threshold) of a question or a learned test: "yes" when
-        weights . x > threshold (``raw:f<v`` is -x_f > -v)."""
-        if question in self.questions:
-            i = self.questions.index(question)
+        weights . x > threshold (``raw:f<v`` is -x_f > -v), as ``answer_matrix`` answers."""
+        i = self.question_index.get(question)
+        if i is not None:
             return self.weights[i], float(self.thresholds[i])
         raw = parse_raw(question)
         if raw is None or raw.feature not in self.features:

@@ -242,8 +242,9 @@ def polish_any(domain: str, tree: Tree) -> Polished:
     return polish(domain, tree) if get_domain(domain).exact is not None else polish_sampled(domain, tree)
 
 
-def polish_kept(domain: str, kept: Tree, start: Tree) -> tuple[Polished, str]:
-    """``optimize``'s polish of PPO's kept tree: (the better climb, "kept" or "start").
+def polish_kept(domain: str, kept: Tree, start: Optional[Tree]) -> tuple[Polished, str]:
+    """``optimize``'s polish of PPO's kept tree: (the better climb, "kept" or "start"); `start`:
+    the tree PPO began from (None for a DDT with no start tree, the random DDT).
 
     The climb keeps the root's question unless one edit changes it, so where PPO moved the tree
     to another root the climb from the user's start can end higher (measured: taxi's never-worse
@@ -253,7 +254,7 @@ def polish_kept(domain: str, kept: Tree, start: Tree) -> tuple[Polished, str]:
     both are climbed and the better end kept (a tie keeps PPO's); a sampled climb takes minutes
     (highway: 163 s of a 100k-step run's 270 s), so there only PPO's tree is."""
     best, source = polish_any(domain, kept), "kept"
-    if get_domain(domain).exact is not None and start != kept and not has_raw_tests(start):
+    if start is not None and get_domain(domain).exact is not None and start != kept and not has_raw_tests(start):
         from_start = polish_any(domain, start)
         if from_start.value > best.value + MIN_GAIN:
             best, source = from_start, "start"

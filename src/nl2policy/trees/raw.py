@@ -42,9 +42,6 @@ class RawTest:
     def id(self) -> str:
         return f"{RAW_PREFIX}{self.feature}{'>' if self.greater else '<'}{self.value:.4f}"
 
-    def holds(self, x: float) -> bool:
-        return x > self.value if self.greater else x < self.value
-
     def wording(self, unit: Optional[FeatureUnit] = None) -> str:
         unit = unit or FeatureUnit(self.feature)
         amount = three_digits(self.value * unit.scale) + (f" {unit.unit}" if unit.unit else "")
@@ -60,10 +57,6 @@ def three_digits(value: float) -> str:
     rounded = exact.quantize(Decimal(1).scaleb(exact.adjusted() - 2), rounding=ROUND_HALF_UP)
     text = format(rounded, "f")
     return text.rstrip("0").rstrip(".") if "." in text else text
-
-
-def is_raw(question: str) -> bool:
-    return question.startswith(RAW_PREFIX)
 
 
 def parse_raw(question: str) -> Optional[RawTest]:
