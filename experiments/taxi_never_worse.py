@@ -22,6 +22,7 @@ Run (one thread; pin to one core): ``taskset -c 1 .venv/bin/python -m experiment
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import statistics
 import sys
@@ -32,7 +33,7 @@ import torch
 
 from nl2policy.domains import get_domain
 from nl2policy.policy.convert import tree_act_fn
-from experiments.policy.table2 import distinct_policies
+from experiments.policy.table2 import distinct_policies, parse_knobs
 from nl2policy.policy.optimize import optimize_tree
 from nl2policy.domains.taxi.ceilings import best_tree
 from nl2policy.report import provenance
@@ -143,17 +144,24 @@ def main() -> None:
     parser.add_argument("--starts", choices=["many", "weak"], default="many",
                         help="many: the 15 most frequent corpus policies and the 5 lowest others; weak: issue 45's "
                              f"weak starts (frequent policies below {WEAK_BELOW}, one per return)")
+    parser.add_argument("--knob", action="append", default=[],
+                        help="KEY=VALUE: a taxi knob (spec.Knobs) changed for every run; use another --out")
     args = parser.parse_args()
     torch.set_num_threads(1)
     command = (f"python -m experiments.taxi_never_worse --seeds {args.seeds} --steps {args.steps} --out {args.out}"
-               + (f" --starts {args.starts}" if args.starts != "many" else ""))
+               + (f" --starts {args.starts}" if args.starts != "many" else "") + "".join(f" --knob {k}" for k in args.knob))
     d = get_domain("taxi")
+    try:
+        changed = parse_knobs(args.knob)
+    except ValueError as exc:
+        parser.error(str(exc))
+    knobs = dataclasses.replace(d.knobs, **changed) if changed else None
     ceiling = best_tree(d.exact.tables(), depth=3).value
     chosen = starts() if args.starts == "many" else weak_starts()
     rows = []
 
     def settings() -> dict:
-        return {"starts": len(chosen), "starts_chosen": args.starts, "seeds": list(range(args.seeds)),
+        return {"starts": len(chosen), "starts_chosen": args.starts, "seeds": list(range(args.seeds)), **({"knobs": changed} if changed else {}),
                 "steps": args.steps, "finished_runs": f"{len(rows)} of {len(chosen) * args.seeds}"}
 
     for start in chosen:
@@ -164,7 +172,7 @@ def main() -> None:
                 rows.append(json.loads(done.read_text()))
                 continue
             begin = time.perf_counter()
-            summary = optimize_tree("taxi", parse_tree(start["tree"], d.vocab), args.steps, seed, run_dir)
+            summary = optimize_tree("taxi", parse_tree(start["tree"], d.vocab), args.steps, seed, run_dir, knobs=knobs)
             row = {"group": start["group"], "rank": start["rank"], "seed": seed, "tree": start["tree"],
                    "count": start["count"], "start_exact": start["exact"], "seconds": time.perf_counter() - begin,
                    "summary": summary}

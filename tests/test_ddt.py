@@ -160,7 +160,7 @@ def test_a_ddt_pickled_before_the_annealing_buffers_loads_with_them_neutral():
     x = torch.rand(8, 3)
     before = ddt(x)
     del ddt._buffers["node_sharpness"], ddt._buffers["leaf_temperature"]
-    del ddt.anneal_to, ddt.sharpen_to, ddt.sharpen_from
+    del ddt.anneal_to, ddt.anneal_from, ddt.sharpen_to, ddt.sharpen_from
     old = pickle.loads(pickle.dumps(ddt))
     assert torch.allclose(old(x), before)
-    assert (old.anneal_to, old.sharpen_to, old.sharpen_from) == (1.0, 1.0, 0.0)
+    assert (old.anneal_to, old.anneal_from, old.sharpen_to, old.sharpen_from) == (1.0, 0.0, 1.0, 0.0)

@@ -127,6 +127,15 @@ def test_leaf_temperature_anneals_from_one_to_the_knob_and_only_sharpens_the_lea
         plain = ddt.log_path_probs(x).exp() @ torch.softmax(ddt.leaf_logits, dim=-1)
         assert not torch.allclose(ddt(x).exp(), plain, atol=1e-3)
     assert float(ddt.node_sharpness) == 1.0  # its own knob, off here
+    late = dataclasses.replace(knobs, leaf_temperature_from=0.5)  # the line starts half way
+    model = train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, TREE, knobs=late), "taxi", 0, 2048,
+                               tmp_path / "late", checkpoints=4).model
+    for step, expected in ((512, 1.0), (1024, 1.0), (1536, 1 + (0.1 - 1) * 0.5), (2048, 0.1)):
+        model.num_timesteps = step
+        anneal(model, 2048)
+        assert float(actor_ddt(model).leaf_temperature) == pytest.approx(expected)
+    with pytest.raises(ValueError, match="knobs"):
+        dataclasses.replace(knobs, leaf_temperature_from=1.0)
     off = dataclasses.replace(knobs, leaf_temperature_end=1.0)
     unchanged = train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, TREE, knobs=off), "taxi", 0, 1024,
                                    tmp_path / "plain", checkpoints=2)

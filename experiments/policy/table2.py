@@ -32,7 +32,8 @@ import numpy as np
 from nl2policy.language.corpus import load_corpus
 from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn, tree_batch_act_fn
 from nl2policy.policy.keep_best import tree_from_json, tree_scorer
-from nl2policy.policy.optimize import EVAL_SEED, checkpoint_tree_score, rolling_mean, train_checkpointed, write_curve
+from nl2policy.policy.optimize import (EVAL_SEED, checkpoint_tree_score, rolling_mean, train_checkpointed, tree_adopter,
+                                      write_curve)
 from nl2policy.policy.polish import can_polish, polish_kept
 from nl2policy.policy.rollout import evaluate, evaluate_batched, evaluate_batched_many, reference_batch_act, tree_policy
 from nl2policy.policy.sb3_policy import METHODS, action_probs_fn, actor_ddt, make_ppo, soft_act_fn
@@ -246,11 +247,12 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
     d = get_domain(domain)
     tree = parse_tree(tree_json, d.vocab) if tree_json else None
     scorer, rule = tree_scorer(domain)  # one scorer: its cache of sampled scores serves every checkpoint and the start
-    score = checkpoint_tree_score(domain, True, scorer) if method != "mlp" else None
     changed = dataclasses.replace(d.knobs, **knobs) if knobs else None
+    score = checkpoint_tree_score(domain, True, scorer, (changed or d.knobs).critic_reading) if method != "mlp" else None
+    adopt = tree_adopter(domain, changed) if method != "mlp" and (changed or d.knobs).adopt_read_tree else None
     model, episodes, seconds, best, probes, last_read = train_checkpointed(
         lambda: make_ppo(domain, method, seed, tree, knobs=changed), domain, seed, steps, run_dir, progress, score,
-        probe=policy_probe(domain, method), checkpoints=CHECKPOINTS)
+        probe=policy_probe(domain, method), checkpoints=CHECKPOINTS, adopt=adopt)
     window = d.knobs.rolling_window
     write_curve(episodes, window, run_dir, f"{domain}: {LABEL[method]} seed {seed}")
     rolling = rolling_mean([r for _, r in episodes], window)

@@ -74,8 +74,9 @@ def write_table(domain: str, table: dict, results: list[dict], settings: dict, o
     tree_rows = table.get("tree_ddt", {})
     ddt_runs = [r for r in results if r.get("method") != "mlp"]
     if ddt_runs and all("last_read" in r for r in ddt_runs):
-        reading = ("tree at that checkpoint as `optimize` reads it, the better of its rounding and its distillation "
-                   "by the selection scenes")
+        reading = ("tree at that checkpoint as `optimize` reads it, the best of its readings by the selection scenes: "
+                   "its rounding, its distillation and, where the domain's `critic_reading` knob is on, the tree its "
+                   "critic's advantages favour (`policy/advantage.py`)")
     else:  # runs from before the probe read trees as optimize does
         reading = "rounded (discretized) tree"
     lines += ["", f"Cells: median ± standard error across runs; in brackets, the normalized score: 0% = uniform random "

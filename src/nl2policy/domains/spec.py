@@ -60,15 +60,19 @@ class Knobs:
     select_episodes: Optional[int] = None  # fast-env episodes for keep-best's sampled score of a tree
     polish_screen_episodes: Optional[int] = None  # fast-env episodes a sampled polish screens each neighbour on
     leaf_temperature_end: float = 1.0  # DDT leaf softmax temperature at the end of training, annealed from 1
+    leaf_temperature_from: float = 0.0  # fraction of the run after which that line starts (before it: 1)
     node_sharpness_end: float = 1.0  # multiple of ddt_gamma at the end of training, on a line from 1
     node_sharpness_from: float = 0.0  # fraction of the run after which that line starts (before it: 1)
     learn_node_features: bool = True  # False: a tree-initialized DDT's node weights stay; thresholds and leaves learn
+    critic_reading: bool = False  # True: checkpoints also read the tree PPO's critic favours (advantage.py)
+    adopt_read_tree: bool = False  # True: where a reading beats the DDT's rounding, PPO continues from it
 
     def __post_init__(self) -> None:
-        if not (self.leaf_temperature_end > 0 and self.node_sharpness_end > 0 and 0 <= self.node_sharpness_from < 1):
-            raise ValueError("knobs: leaf_temperature_end and node_sharpness_end must be > 0 and node_sharpness_from "
-                             f"in [0, 1); got {self.leaf_temperature_end}, {self.node_sharpness_end}, "
-                             f"{self.node_sharpness_from}")
+        if not (self.leaf_temperature_end > 0 and self.node_sharpness_end > 0 and 0 <= self.node_sharpness_from < 1
+                and 0 <= self.leaf_temperature_from < 1):
+            raise ValueError("knobs: leaf_temperature_end and node_sharpness_end must be > 0, node_sharpness_from and "
+                             f"leaf_temperature_from in [0, 1); got {self.leaf_temperature_end}, {self.node_sharpness_end}, "
+                             f"{self.node_sharpness_from}, {self.leaf_temperature_from}")
 
 
 Act = Callable[[np.ndarray], int]

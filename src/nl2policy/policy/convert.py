@@ -82,22 +82,44 @@ def tree_to_ddt(domain_name: str, tree: Tree, pad: bool = False, gamma: Optional
     sharpness and leaf mass from `knobs` (default: the domain's), `gamma` overriding."""
     domain = get_domain(domain_name)
     knobs = knobs or domain.knobs
-    leaf_mass = knobs.leaf_mass
     if pad:
         tree = pad_tree(tree, domain)
-    shape, questions, actions = _shape_and_tests(tree)
-    n_actions = len(domain.actions)
-    ddt = DDT(shape, len(domain.features), n_actions, knobs.ddt_gamma if gamma is None else gamma)
-    tests = [domain.question_test(q) for q in questions]  # dictionary questions and learned (raw) tests
-    other = math.log((1.0 - leaf_mass) / (n_actions - 1))
-    logits = torch.full((shape.leaves, n_actions), other)
-    for leaf, action in enumerate(actions):
-        logits[leaf, domain.action_index(action)] = math.log(leaf_mass)
-    with torch.no_grad():
-        ddt.weights.copy_(torch.as_tensor(np.array([w for w, _ in tests]), dtype=torch.float32).reshape(shape.nodes, -1))
-        ddt.comparators.copy_(torch.as_tensor(np.array([c for _, c in tests]), dtype=torch.float32).reshape(shape.nodes))
-        ddt.leaf_logits.copy_(logits)
+    shape, _, _ = _shape_and_tests(tree)
+    ddt = DDT(shape, len(domain.features), len(domain.actions), knobs.ddt_gamma if gamma is None else gamma)
+    load_tree(ddt, domain_name, tree, knobs.leaf_mass)
     return ddt
+
+
+def load_tree(ddt: DDT, domain_name: str, tree: Tree, leaf_mass: float) -> None:
+    """Set `ddt`'s tests and leaves, in place, so that it acts like `tree`, which must have the
+    DDT's shape once padded to it (any numbering of the nodes: the two are walked together).
+    ``optimize`` uses it to move a training DDT onto a tree read from it."""
+    domain = get_domain(domain_name)
+    n_actions = len(domain.actions)
+    if _shape_and_tests(tree)[0].nodes != ddt.shape.nodes:
+        tree = pad_tree(tree, domain)
+    weights = ddt.weights.detach().clone()
+    comparators = ddt.comparators.detach().clone()
+    logits = torch.full_like(ddt.leaf_logits, math.log((1.0 - leaf_mass) / (n_actions - 1)))
+
+    def walk(node: Tree, child: tuple[str, int]) -> None:
+        kind, i = child
+        if isinstance(node, Leaf) != (kind == "leaf"):
+            raise ValueError("the tree does not have the DDT's shape")
+        if kind == "leaf":
+            logits[i, domain.action_index(node.action)] = math.log(leaf_mass)
+            return
+        w, c = domain.question_test(node.question)  # dictionary questions and learned (raw) tests
+        weights[i] = torch.as_tensor(np.asarray(w), dtype=weights.dtype)
+        comparators[i] = float(c)
+        walk(node.yes, ddt.shape.yes_child[i])
+        walk(node.no, ddt.shape.no_child[i])
+
+    walk(tree, ("node", 0) if ddt.shape.nodes else ("leaf", 0))
+    with torch.no_grad():
+        ddt.weights.copy_(weights)
+        ddt.comparators.copy_(comparators)
+        ddt.leaf_logits.copy_(logits)
 
 
 def _single_feature_questions(domain: Domain) -> list[tuple[str, int, float, float]]:

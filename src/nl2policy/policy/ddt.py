@@ -84,7 +84,7 @@ class DDT(nn.Module):
         # `anneal_to` (1: no annealing), so the soft policy PPO trains ends near the tree read
         # from it. Not saved: the schedule sets it again from the step count.
         self.register_buffer("leaf_temperature", torch.tensor(1.0), persistent=False)
-        self.anneal_to = 1.0
+        self.anneal_to, self.anneal_from = 1.0, 0.0  # the line starts `anneal_from` of the way in
         # The same for the nodes: a multiple of gamma, from 1 up to `sharpen_to` on a line that
         # starts `sharpen_from` of the way into the run, so that the soft policy's paths end
         # near the crisp tree's too while PPO could still move its questions earlier on.
@@ -98,7 +98,7 @@ class DDT(nn.Module):
         for name in ("leaf_temperature", "node_sharpness"):
             if name not in self._buffers:
                 self.register_buffer(name, torch.tensor(1.0), persistent=False)
-        for name, value in (("anneal_to", 1.0), ("sharpen_to", 1.0), ("sharpen_from", 0.0)):
+        for name, value in (("anneal_to", 1.0), ("anneal_from", 0.0), ("sharpen_to", 1.0), ("sharpen_from", 0.0)):
             if not hasattr(self, name):
                 setattr(self, name, value)
 

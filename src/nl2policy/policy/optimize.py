@@ -6,16 +6,18 @@ again with the same ``out`` folder loads the checkpoint and continues from the s
 
 What ``optimize_tree`` returns (``final_tree.json``) is never worse than the tree it was
 given: the best of the initial tree and every checkpoint's tree (``keep_best``), where a
-checkpoint's tree is the better of two readings of the trained DDT: its rounding and its
+checkpoint's tree is the best of the readings of the trained DDT: its rounding; its
 distillation, the dictionary tree that acts most like it in the states PPO visited lately
 (``distill``; measured on highway, a start at 17.82 whose rounded trees never beat it came back
-at 19.53 read by distillation: results/policy/history/distilled_reading_probe.md), then, with
-``polish``, a hill climb over questions and actions from it (``polish``: on the exact model
-where the domain has one, climbing from the start tree too and keeping the better end, else on
-common sampled scenes of its fast simulator). PPO's own last
-tree (``last_tree.json``, its last checkpoint read the same two ways), the kept tree (``best_tree.json``) and the polished one
-(``polished_tree.json``) are written and scored beside it, so the paper's DDT + PPO and each
-added step are reported separately.
+at 19.53 read by distillation: results/policy/history/distilled_reading_probe.md); and, with
+the domain's ``critic_reading`` knob, the tree PPO's critic favours there (``advantage``). With
+``adopt_read_tree``, PPO continues from a checkpoint's tree wherever a reading beat the
+rounding (``tree_adopter``). Then, with ``polish``, a hill climb over questions and actions
+from it (``polish``: on the exact model where the domain has one, climbing from the start tree
+too and keeping the better end, else on common sampled scenes of its fast simulator). PPO's own
+last tree (``last_tree.json``, its last checkpoint read the same ways), the kept tree
+(``best_tree.json``) and the polished one (``polished_tree.json``) are written and scored beside
+it, so the paper's DDT + PPO and each added step are reported separately.
 """
 
 from __future__ import annotations
@@ -32,7 +34,9 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from nl2policy.domains import get_domain
-from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn
+from nl2policy.domains.spec import Knobs
+from nl2policy.policy.advantage import advantage_tree
+from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, load_tree, tree_act_fn
 from nl2policy.policy.distill import VisitedStates, distilled_tree
 from nl2policy.policy.keep_best import keep_best, tree_from_json, tree_scorer
 from nl2policy.policy.rollout import evaluate, tree_policy
@@ -75,20 +79,23 @@ class EpisodeLog(BaseCallback):
         return True
 
 
-TreeScore = Callable[[PPO, Optional[np.ndarray]], tuple[dict, float, str]]
-"""(model, states it visited lately or None) -> (the tree it hands back as JSON, that tree's
-score, how the tree was read from the model: "rounded" or "distilled")."""
+TreeScore = Callable[[PPO, Optional[VisitedStates]], tuple[dict, float, str]]
+"""(model, its latest rollouts or None) -> (the tree it hands back as JSON, that tree's score, how
+the tree was read from the model: "rounded", "distilled" or "critic")."""
 
 
 def checkpoint_tree_score(domain: str, sampled: bool = False,
-                          scorer: Optional[Callable[[Tree], float]] = None) -> Optional[TreeScore]:
+                          scorer: Optional[Callable[[Tree], float]] = None,
+                          critic: Optional[bool] = None) -> Optional[TreeScore]:
     """How to read and score the tree of the policy at each checkpoint (``keep_best.tree_scorer``),
     or None.
 
-    Two readings of the trained DDT compete: its rounding (``ddt_to_tree``: each node's strongest
-    feature, each leaf's likeliest action) and, given the states PPO visited lately, its
-    distillation (``distill.distilled_tree``: the dictionary tree acting most like it there). The
-    better by `scorer` is the checkpoint's tree (a tie keeps the rounding).
+    Readings of the trained DDT compete: its rounding (``ddt_to_tree``: each node's strongest
+    feature, each leaf's likeliest action), and, given PPO's latest rollouts, its distillation
+    (``distill.distilled_tree``: the dictionary tree acting most like it in the states visited)
+    and, with `critic` (default: the domain's ``critic_reading`` knob), the tree its critic's
+    advantages favour there (``advantage.advantage_tree``). The best by `scorer` is the
+    checkpoint's tree (a tie keeps the earlier reading, in that order).
 
     With an exact model (taxi): the exact expected return (~0.1 s, no sampling noise). PPO's tree
     wanders between checkpoints (measured: results/policy/tuning_taxi.md), so the run also keeps
@@ -96,18 +103,26 @@ def checkpoint_tree_score(domain: str, sampled: bool = False,
     Without one (highway), sampled episodes cost seconds each: only where `sampled` asks for it
     (``optimize`` does, to return a tree never worse than its start; the Table 2 grid does too).
     `scorer`: one already made, to share its cache of sampled scores."""
-    if get_domain(domain).exact is None and not sampled:
+    d = get_domain(domain)
+    if d.exact is None and not sampled:
         return None
     scorer = scorer or tree_scorer(domain)[0]
+    critic = d.knobs.critic_reading if critic is None else critic
 
-    def score(model: PPO, states: Optional[np.ndarray] = None) -> tuple[dict, float, str]:
+    def score(model: PPO, rollouts: Optional[VisitedStates] = None) -> tuple[dict, float, str]:
         tree, read = ddt_to_tree(domain, actor_ddt(model)), "rounded"
         value = scorer(tree)
+        states = rollouts.states() if rollouts is not None else None
         if states is not None and len(states):
-            distilled = distilled_tree(domain, action_probs_fn(model), states)
-            distilled_value = scorer(distilled)
-            if distilled_value > value:
-                tree, value, read = distilled, distilled_value, "distilled"
+            probs = action_probs_fn(model)
+            readings = [("distilled", lambda: distilled_tree(domain, probs, states))]
+            if critic:
+                readings.append(("critic", lambda: advantage_tree(domain, probs, states, *rollouts.taken())))
+            for name, reading in readings:
+                other = reading()
+                other_value = scorer(other)
+                if other_value > value:
+                    tree, value, read = other, other_value, name
         return tree_to_json(tree), value, read
 
     return score
@@ -121,17 +136,21 @@ def anneal(model: PPO, total: int) -> None:
     if not hasattr(ddt, "leaf_temperature"):
         return  # the MLP
     frac = min(1.0, model.num_timesteps / max(1, total))
+
+    def line(start: float) -> float:  # 0 until `start` of the way in, then up to 1 at the end
+        return max(0.0, (frac - start) / max(1e-9, 1.0 - start))
+
     if ddt.anneal_to != 1.0:
-        ddt.leaf_temperature.fill_(1.0 + (ddt.anneal_to - 1.0) * frac)
+        ddt.leaf_temperature.fill_(1.0 + (ddt.anneal_to - 1.0) * line(ddt.anneal_from))
     if ddt.sharpen_to != 1.0:
-        start = ddt.sharpen_from
-        ddt.node_sharpness.fill_(1.0 + (ddt.sharpen_to - 1.0) * max(0.0, (frac - start) / max(1e-9, 1.0 - start)))
+        ddt.node_sharpness.fill_(1.0 + (ddt.sharpen_to - 1.0) * line(ddt.sharpen_from))
 
 
 class Anneal(BaseCallback):
-    """Before each rollout, set the DDT's leaf temperature on a line from 1 at step 0 to its
-    ``anneal_to`` at `total` steps, and its node sharpness from 1 to its ``sharpen_to`` on a line
-    that starts ``sharpen_from`` of the way in; a rollout and the update on it share one setting.
+    """Before each rollout, set the DDT's leaf temperature on a line from 1 to its ``anneal_to``
+    at `total` steps that starts ``anneal_from`` of the way in, and its node sharpness from 1 to
+    its ``sharpen_to`` on a line that starts ``sharpen_from`` of the way in; a rollout and the
+    update on it share one setting.
 
     Why the nodes can start late: PPO's tree improves late in a run (taxi Table 2's kept trees
     came from steps 134k-282k of 300k), and sharp nodes stop their questions moving. Measured
@@ -150,6 +169,28 @@ class Anneal(BaseCallback):
         return True
 
 
+def tree_adopter(domain: str, knobs: Optional[Knobs] = None) -> Callable[[PPO, Tree], None]:
+    """Moves a training tree-DDT onto a tree read from it (``train_checkpointed``'s `adopt`): its
+    tests and leaves are set as a fresh tree-initialized DDT's (``convert.load_tree``, the leaf
+    mass from `knobs`), and Adam's running moments for them are dropped, so that the next
+    update starts from the tree rather than from the old parameters' momentum.
+
+    Why: the critic's and the distilled readings find trees better than the DDT's own, and PPO
+    then trains the tree it will hand back, a step of policy iteration between chunks of policy
+    gradient. Measured on highway's Table 2 (results/policy/ablation_critic_adopt*/): the soft
+    policy ends within 0.5 of its tree in more runs than with the readings alone, but the kept
+    tree is lower, so no domain turns it on (the knob ``adopt_read_tree``)."""
+    leaf_mass = (knobs or get_domain(domain).knobs).leaf_mass
+
+    def adopt(model: PPO, tree: Tree) -> None:
+        ddt = actor_ddt(model)
+        load_tree(ddt, domain, tree, leaf_mass)
+        for parameter in ddt.parameters():
+            model.policy.optimizer.state.pop(parameter, None)
+
+    return adopt
+
+
 class Trained(NamedTuple):
     """What ``train_checkpointed`` hands back."""
 
@@ -165,17 +206,21 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
                        progress: Progress = None,
                        score_tree: Optional[TreeScore] = None,
                        simulator: str = "fast", probe: Optional[Callable[[PPO, Optional[dict]], dict]] = None,
-                       checkpoints: int = 10) -> Trained:
+                       checkpoints: int = 10, adopt: Optional[Callable[[PPO, Tree], None]] = None) -> Trained:
     """Train to `steps` env steps in about `checkpoints` chunks, checkpointing into `run_dir`
     after each; resumes a saved run.
 
-    With `score_tree`, the model's tree (read from the states PPO visited in its latest rollouts,
-    ``distill.VisitedStates``) is scored after every chunk and the best one kept
-    (``{"step", "tree", "score", "read"}``; the initial actor's tree counts as step 0). With `probe`,
+    With `score_tree`, the model's tree (read with PPO's latest rollouts, ``distill.VisitedStates``)
+    is scored after every chunk and the best one kept (``{"step", "tree", "score", "read"}``; the initial actor's tree counts as step 0). With `probe`,
     its measurements of the model (Table 2: the exact return of the policy a method hands
     back) are recorded at step 0 and after every chunk, so a curve of them survives resumes; it is
     given the checkpoint's tree as read above (None without `score_tree`), so what it scores is
-    the tree a user would get from that checkpoint."""
+    the tree a user would get from that checkpoint.
+
+    With `adopt` (``tree_adopter``), wherever a checkpoint's tree was read by another reading than
+    the DDT's own rounding (it scored higher), PPO continues from that tree: its DDT is set to
+    act like it. The probe then measures the soft policy after the move, and records the one
+    before it as ``soft_before_adopt``."""
     # PPO here runs batch-of-one forward passes through tiny nets: extra intra-op threads only
     # contend (measured 25x slower with 2 threads on a busy 2-core machine), so use one.
     torch.set_num_threads(1)
@@ -218,12 +263,18 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
         seconds += time.perf_counter() - start
         chunks += 1
         if score_tree is not None:
-            tree_json, score, read = score_tree(model, visited.states())
+            tree_json, score, read = score_tree(model, visited)
             last = {"step": int(model.num_timesteps), "tree": tree_json, "score": score, "read": read}
             if score > best["score"]:
                 best = last
-        if probe is not None:
-            probes.append({"step": int(model.num_timesteps), **probe(model, last and last["tree"])})
+        entry = {"step": int(model.num_timesteps), **probe(model, last and last["tree"])} if probe is not None else None
+        if adopt is not None and last is not None and last["read"] != "rounded":
+            adopt(model, tree_from_json(last["tree"]))
+            last = {**last, "adopted": True}
+            if entry is not None:
+                entry = {**entry, "soft_before_adopt": entry["soft"], **probe(model, last["tree"])}
+        if entry is not None:
+            probes.append(entry)
         _write_atomically(ckpt_path, model.save)
         state = {"steps": int(model.num_timesteps), "seconds": seconds, "chunks": chunks, "episodes": episodes,
                  "best_tree": best, "last_tree": last, "probes": probes, "simulator": trained_on}
@@ -273,14 +324,16 @@ def write_curve(episodes: list, window: int, out: Path, title: str) -> None:
 
 def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, progress: Progress = None,
                   eval_episodes: Optional[int] = None, polish: Optional[bool] = None,
-                  simulator: str = "fast") -> dict:
+                  simulator: str = "fast", knobs: Optional[Knobs] = None) -> dict:
     """PPO from the tree-initialized DDT, then keep-best and (`polish`, default: where the
     domain has an exact model) the polish; writes initial_tree.json, last_tree.json,
     best_tree.json, [polished_tree.json,] final_tree.json (what is returned), curve.csv,
-    curve.png and summary.json into `out` and returns the summary (see module doc)."""
+    curve.png and summary.json into `out` and returns the summary (see module doc). `knobs`: the
+    domain's, changed for an experiment."""
     from nl2policy.policy.polish import can_polish, polish_kept
 
     d = get_domain(domain)
+    knobs = knobs or d.knobs
     polish = can_polish(domain) if polish is None else polish
     if polish and not can_polish(domain):
         raise OptimizeRefused(f"--polish needs an exact model or a fast simulator with polish knobs; {domain} has neither")
@@ -292,8 +345,9 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
     tree_path.write_text(json.dumps(tree_to_json(tree), indent=2))
     scorer, rule = tree_scorer(domain)
     model, episodes, seconds, best, _, last = train_checkpointed(
-        lambda: make_ppo(domain, "tree_ddt", seed, tree, simulator=simulator), domain, seed, steps, out, progress,
-        checkpoint_tree_score(domain, True, scorer), simulator)
+        lambda: make_ppo(domain, "tree_ddt", seed, tree, simulator=simulator, knobs=knobs), domain, seed, steps, out,
+        progress, checkpoint_tree_score(domain, True, scorer, knobs.critic_reading), simulator,
+        adopt=tree_adopter(domain, knobs) if knobs.adopt_read_tree else None)
     last_tree = tree_from_json(last["tree"])  # PPO's own tree at the end, read as every checkpoint's
     (out / "last_tree.json").write_text(json.dumps(tree_to_json(last_tree), indent=2))
     start = time.perf_counter()
@@ -309,7 +363,6 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
         if polished.value > kept_score:
             final_tree, returned = polished.tree, "polished"
     (out / "final_tree.json").write_text(json.dumps(tree_to_json(final_tree), indent=2))
-    knobs = d.knobs
     window = knobs.rolling_window
     write_curve(episodes, window, out, f"{domain}: PPO from the tree-initialized DDT (seed {seed})")
     n = eval_episodes or knobs.eval_episodes

@@ -122,7 +122,7 @@ def make_ppo(domain: str, method: str, seed: int, tree: Optional[Tree] = None, e
     actor = initial_actor(domain, method, seed, tree, knobs)
     if actor is not None:
         actor.anneal_to, actor.sharpen_to = knobs.leaf_temperature_end, knobs.node_sharpness_end
-        actor.sharpen_from = knobs.node_sharpness_from
+        actor.sharpen_from, actor.anneal_from = knobs.node_sharpness_from, knobs.leaf_temperature_from
         if method == "tree_ddt" and not knobs.learn_node_features:
             # each node keeps the feature its question tests (a readable test: the question, or a
             # threshold on its feature); only comparators and leaves learn. The flag travels with
