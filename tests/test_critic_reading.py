@@ -27,6 +27,20 @@ def test_fit_tree_scores_maximizes_the_summed_score():
     assert fit_tree_scores(answers, flat, list(d.questions), list(d.actions)) == from_tokens(["wait"], d.vocab)
 
 
+def test_of_equal_trees_the_fit_keeps_the_one_with_fewer_questions():
+    """Scores that one question separates, listed after questions that could separate them too
+    (each split by an earlier question, then the deciding one, scores the same): the one-question
+    tree wins."""
+    d = get_domain("taxi")
+    answers = np.array([[a[q] for q in d.questions] for a in d.possible_answer_sets], dtype=bool)
+    last = len(d.questions) - 1
+    scores = np.zeros((len(answers), len(d.actions)))
+    scores[answers[:, last], d.action_index("wait")] = 1.0
+    scores[~answers[:, last], d.action_index("go_city")] = 1.0
+    tree = fit_tree_scores(answers, scores, list(d.questions), list(d.actions))
+    assert tree == from_tokens([d.questions[last], "wait", "go_city"], d.vocab)
+
+
 def test_the_critic_reading_follows_the_advantages_and_shrinks_rare_actions():
     """Synthetic rollouts of a policy that always waits: "go_city" pays where there is no
     passenger (advantage +1, tried often), "go_airport" was tried twice with a passenger and did
@@ -62,18 +76,36 @@ def test_the_critic_reading_follows_the_advantages_and_shrinks_rare_actions():
 
 
 @pytest.mark.train
-def test_visited_rollouts_record_each_states_action_and_advantage():
+def test_visited_rollouts_pair_each_state_with_its_action_and_advantage():
+    """On highway's 16 side-by-side episodes: at the end of a rollout (after SB3 computed GAE, before
+    its update reorders the buffer), row i of the kept states, actions and advantages is one
+    (step, episode) of the buffer; older rows fall off the front."""
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
     from nl2policy.policy.distill import VisitedStates
     from nl2policy.policy.sb3_policy import make_ppo
 
-    model = make_ppo("taxi", "mlp", seed=0)
-    visited = VisitedStates(keep=300)
-    model.learn(model.n_steps * model.n_envs, callback=visited)
-    actions, advantages = visited.taken()
-    buffer = model.rollout_buffer
-    assert len(actions) == len(advantages) == len(visited.states()) == 300
-    assert np.array_equal(actions, np.asarray(buffer.actions).reshape(-1)[-300:].astype(int))
-    assert np.allclose(advantages, np.asarray(buffer.advantages).reshape(-1)[-300:])
+    class Snapshot(BaseCallback):
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_end(self) -> None:
+            buffer = self.model.rollout_buffer
+            self.copies = [np.array(buffer.observations), np.array(buffer.actions), np.array(buffer.advantages)]
+
+    model = make_ppo("highway", "mlp", seed=0)
+    keep = model.n_steps * model.n_envs + 100  # the last rollout and 100 rows of the one before
+    visited, snapshot = VisitedStates(keep=keep), Snapshot()
+    model.learn(model.n_steps * model.n_envs * 2, callback=CallbackList([visited, snapshot]))
+    states, (actions, advantages) = visited.states(), visited.taken()
+    assert model.n_envs > 1 and len(states) == len(actions) == len(advantages) == keep
+    obs, acts, advs = snapshot.copies  # (n_steps, n_envs, ...): step t of episode e
+    rng = np.random.default_rng(0)
+    for t, e in zip(rng.integers(model.n_steps, size=20), rng.integers(model.n_envs, size=20)):
+        row = 100 + t * model.n_envs + e
+        assert np.array_equal(states[row], obs[t, e]) and actions[row] == int(acts[t, e, 0])
+        assert advantages[row] == pytest.approx(float(advs[t, e]))
+    assert not np.allclose(advantages, 0.0)
 
 
 def test_load_tree_sets_any_complete_ddt_to_act_like_a_tree():
@@ -106,33 +138,31 @@ def test_load_tree_sets_any_complete_ddt_to_act_like_a_tree():
 def test_adopting_a_read_tree_moves_the_training_ddt_onto_it(tmp_path):
     """train_checkpointed with `adopt`: where a checkpoint's tree came from another reading than
     the rounding, the DDT then acts like that tree, Adam forgets the actor's moments, and the
-    probe records the soft policy before and after the move."""
+    probe records the soft policy before and after the move; after the last chunk nothing moves,
+    so the soft policy scored at the end is the one PPO trained."""
     from nl2policy.policy.convert import ddt_to_tree
     from nl2policy.policy.optimize import train_checkpointed, tree_adopter
-    from nl2policy.policy.sb3_policy import actor_ddt, make_ppo
+    from nl2policy.policy.sb3_policy import action_probs_fn, actor_ddt, make_ppo
     from nl2policy.trees import tree_to_json
 
     d = get_domain("taxi")
     start = from_tokens("has_passenger go_airport go_city".split(), d.vocab)
     target = from_tokens("has_passenger go_airport heavy_traffic go_village go_city".split(), d.vocab)
-    calls = []
+    seen = []  # at every probe: (the DDT's rounded tree, whether Adam holds moments for the actor)
 
     def score(model, rollouts=None):  # the checkpoint's "distilled" tree is always the target
-        calls.append(rollouts is not None)
         return tree_to_json(target), 1.0, "distilled" if rollouts is not None else "rounded"
 
     def probe(model, tree_json=None):
-        return {"policy": 0.0, "soft": float(d.exact.expected_return_mixed(
-            lambda X: model.policy.get_distribution(torch.as_tensor(X, dtype=torch.float32)).distribution.probs.detach().numpy()))}
+        ddt = actor_ddt(model)
+        seen.append((ddt_to_tree("taxi", ddt), any(p in model.policy.optimizer.state for p in ddt.parameters())))
+        return {"policy": 0.0, "soft": float(d.exact.expected_return_mixed(action_probs_fn(model)))}
 
-    import torch
-
-    trained = train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, start), "taxi", 0, 1024, tmp_path, score_tree=score,
-                                 probe=probe, checkpoints=2, adopt=tree_adopter("taxi"))
-    ddt = actor_ddt(trained.model)
-    states = np.array([[float(a[f]) if f in a else 0.0 for f in d.features] for a in d.possible_answer_sets])
-    assert (ddt.greedy(torch.as_tensor(states, dtype=torch.float32)).numpy() == d.tree_actions(target, states)).all()
-    assert ddt_to_tree("taxi", ddt) == target
-    assert all(p not in trained.model.policy.optimizer.state for p in ddt.parameters())
-    assert trained.last["adopted"] and all("soft_before_adopt" in p for p in trained.probes[1:])
-    assert trained.probes[-1]["soft"] != trained.probes[-1]["soft_before_adopt"]  # measured after the move
+    trained = train_checkpointed(lambda: make_ppo("taxi", "tree_ddt", 0, start), "taxi", 0, 1536, tmp_path,
+                                 score_tree=score, probe=probe, checkpoints=3, adopt=tree_adopter("taxi"))
+    # probes: step 0; then per chunk one before the move and, where it moved, one after it
+    assert [("soft_before_adopt" in p) for p in trained.probes] == [False, True, True, False]
+    assert len(seen) == 1 + 2 * 2 + 1
+    for before, after in ((seen[1], seen[2]), (seen[3], seen[4])):
+        assert after == (target, False) and before[1]  # moved onto the target, Adam's moments dropped
+    assert "adopted" not in trained.last  # the last chunk's tree was read, not adopted

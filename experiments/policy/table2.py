@@ -173,8 +173,8 @@ def normalized(value: float, yardsticks: dict) -> float:
 
 def policy_probe(domain: str, method: str) -> Optional[Callable]:
     """What Table 2 measures at every checkpoint: the return of the policy the method hands
-    back (a DDT method: the checkpoint's tree as `optimize` reads it, the better of its rounding
-    and its distillation, given by the training loop; the MLP: its greedy actions) and of the
+    back (a DDT method: the checkpoint's tree as `optimize` reads it, the best of its readings,
+    given by the training loop; the MLP: its greedy actions) and of the
     soft policy PPO trains (sampled actions). Exact where the domain has an exact model; else on
     ``probe_episodes`` fast-sim scenes from ``EVAL_SEED``, common to every run and checkpoint.
     None for a domain with neither."""

@@ -63,7 +63,7 @@ class Knobs:
     leaf_temperature_from: float = 0.0  # fraction of the run after which that line starts (before it: 1)
     node_sharpness_end: float = 1.0  # multiple of ddt_gamma at the end of training, on a line from 1
     node_sharpness_from: float = 0.0  # fraction of the run after which that line starts (before it: 1)
-    learn_node_features: bool = True  # False: a tree-initialized DDT's node weights stay; thresholds and leaves learn
+    learn_node_features: bool = True  # False: a tree-initialized DDT's node weights get no gradient; thresholds and leaves learn
     critic_reading: bool = False  # True: checkpoints also read the tree PPO's critic favours (advantage.py)
     adopt_read_tree: bool = False  # True: where a reading beats the DDT's rounding, PPO continues from it
 

@@ -13,9 +13,15 @@ where different actions pay, which gradient steps on a soft tree find slowly or 
 The step is only as good as the advantages. Each action's mean is taken relative to the cell's
 mean advantage over all its samples (the policy's own actions average zero advantage, up to the
 critic's error in that cell), and an action tried a few times has a noisy mean, so each (cell,
-action) mean is shrunk toward the cell's by ``SHRINK`` pseudo-samples: an action never tried
-scores as the policy's own choice does, and among actions the critic cannot tell apart the
-policy's likelier one wins. Whoever uses the tree
+action) mean is shrunk toward the cell's by ``SHRINK`` pseudo-samples. An action never tried in a
+cell scores zero there, as the cell's average does: below an action that did better than the
+average and above one that did worse; among actions the critic cannot tell apart the policy's
+likelier one wins. A leaf that serves several cells sums their scores, so it can pick an action
+tried in none of them where every tried one did worse than average somewhere; such a tree is only
+a candidate, scored like every reading before it is kept.
+
+The rollouts are PPO's latest ``distill.VISITED`` states, which can span more than one chunk of
+training: older ones carry the advantages of an earlier policy and critic. Whoever uses the tree
 scores it first (``optimize.checkpoint_tree_score`` keeps it only where it beats the other
 readings).
 """

@@ -92,7 +92,8 @@ def tree_to_ddt(domain_name: str, tree: Tree, pad: bool = False, gamma: Optional
 
 def load_tree(ddt: DDT, domain_name: str, tree: Tree, leaf_mass: float) -> None:
     """Set `ddt`'s tests and leaves, in place, so that it acts like `tree`, which must have the
-    DDT's shape once padded to it (any numbering of the nodes: the two are walked together).
+    DDT's shape as it is or once padded to the full depth (``pad_tree``); any numbering of the
+    nodes, since the two are walked together.
     ``optimize`` uses it to move a training DDT onto a tree read from it."""
     domain = get_domain(domain_name)
     n_actions = len(domain.actions)

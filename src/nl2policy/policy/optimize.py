@@ -220,7 +220,8 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
     With `adopt` (``tree_adopter``), wherever a checkpoint's tree was read by another reading than
     the DDT's own rounding (it scored higher), PPO continues from that tree: its DDT is set to
     act like it. The probe then measures the soft policy after the move, and records the one
-    before it as ``soft_before_adopt``."""
+    before it as ``soft_before_adopt``. Not after the last chunk: there is no training left, and
+    the soft policy at the end is the one PPO trained."""
     # PPO here runs batch-of-one forward passes through tiny nets: extra intra-op threads only
     # contend (measured 25x slower with 2 threads on a busy 2-core machine), so use one.
     torch.set_num_threads(1)
@@ -268,7 +269,7 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
             if score > best["score"]:
                 best = last
         entry = {"step": int(model.num_timesteps), **probe(model, last and last["tree"])} if probe is not None else None
-        if adopt is not None and last is not None and last["read"] != "rounded":
+        if adopt is not None and last is not None and last["read"] != "rounded" and model.num_timesteps < steps:
             adopt(model, tree_from_json(last["tree"]))
             last = {**last, "adopted": True}
             if entry is not None:
@@ -329,7 +330,8 @@ def optimize_tree(domain: str, tree: Tree, steps: int, seed: int, out: Path, pro
     domain has an exact model) the polish; writes initial_tree.json, last_tree.json,
     best_tree.json, [polished_tree.json,] final_tree.json (what is returned), curve.csv,
     curve.png and summary.json into `out` and returns the summary (see module doc). `knobs`: the
-    domain's, changed for an experiment."""
+    domain's, changed for an experiment's training (PPO, the DDT, the readings, adoption); trees
+    are still scored and polished with the domain's own knobs."""
     from nl2policy.policy.polish import can_polish, polish_kept
 
     d = get_domain(domain)
