@@ -141,7 +141,8 @@ def test_adopting_a_read_tree_moves_the_training_ddt_onto_it(tmp_path):
     probe records the soft policy before and after the move; after the last chunk nothing moves,
     so the soft policy scored at the end is the one PPO trained."""
     from nl2policy.policy.convert import ddt_to_tree
-    from nl2policy.policy.optimize import train_checkpointed, tree_adopter
+    from nl2policy.policy.optimize import train_checkpointed
+    from nl2policy.policy.readings import tree_adopter
     from nl2policy.policy.sb3_policy import action_probs_fn, actor_ddt, make_ppo
     from nl2policy.trees import tree_to_json
 

@@ -127,12 +127,10 @@ def test_discretization_keeps_unmatched_threshold_as_raw_test():
 
 @pytest.mark.parametrize("domain", DOMAINS)
 def test_vectorized_tree_actions_match_domain_tree_action(domain):
-    from nl2policy.policy.fidelity import tree_actions_batch
-
     d = get_domain(domain)
     states = uniform_states(domain, 200, seed=5)
     for tree in trees_of(domain)[:10]:
-        assert tree_actions_batch(domain, tree, states).tolist() == [d.tree_action(tree, x) for x in states]
+        assert d.tree_actions(tree, states).tolist() == [d.tree_action(tree, x) for x in states]
 
 
 def test_discretization_prunes_a_question_the_path_already_answers():

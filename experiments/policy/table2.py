@@ -32,9 +32,9 @@ import numpy as np
 from nl2policy.language.corpus import load_corpus
 from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, tree_act_fn, tree_batch_act_fn
 from nl2policy.policy.keep_best import tree_from_json, tree_scorer
-from nl2policy.policy.optimize import (EVAL_SEED, checkpoint_tree_score, rolling_mean, train_checkpointed, tree_adopter,
-                                      write_curve)
+from nl2policy.policy.optimize import EVAL_SEED, rolling_mean, train_checkpointed, write_curve
 from nl2policy.policy.polish import can_polish, polish_kept
+from nl2policy.policy.readings import checkpoint_tree_score, tree_adopter
 from nl2policy.policy.rollout import evaluate, evaluate_batched, evaluate_batched_many, reference_batch_act, tree_policy
 from nl2policy.policy.sb3_policy import METHODS, action_probs_fn, actor_ddt, make_ppo, soft_act_fn
 from nl2policy.trees import parse_tree, tree_to_json
@@ -248,8 +248,9 @@ def run_one(domain: str, method: str, seed: int, steps: int, run_dir: Path, tree
     tree = parse_tree(tree_json, d.vocab) if tree_json else None
     scorer, rule = tree_scorer(domain)  # one scorer: its cache of sampled scores serves every checkpoint and the start
     changed = dataclasses.replace(d.knobs, **knobs) if knobs else None
-    score = checkpoint_tree_score(domain, True, scorer, (changed or d.knobs).critic_reading) if method != "mlp" else None
-    adopt = tree_adopter(domain, changed) if method != "mlp" and (changed or d.knobs).adopt_read_tree else None
+    used = changed or d.knobs
+    score = checkpoint_tree_score(domain, True, scorer, used.critic_reading) if method != "mlp" else None
+    adopt = tree_adopter(domain, used) if method != "mlp" and used.adopt_read_tree else None
     model, episodes, seconds, best, probes, last_read = train_checkpointed(
         lambda: make_ppo(domain, method, seed, tree, knobs=changed), domain, seed, steps, run_dir, progress, score,
         probe=policy_probe(domain, method), checkpoints=CHECKPOINTS, adopt=adopt)

@@ -22,7 +22,7 @@ a candidate, scored like every reading before it is kept.
 
 The rollouts are PPO's latest ``distill.VISITED`` states, which can span more than one chunk of
 training: older ones carry the advantages of an earlier policy and critic. Whoever uses the tree
-scores it first (``optimize.checkpoint_tree_score`` keeps it only where it beats the other
+scores it first (``readings.checkpoint_tree_score`` keeps it only where it beats the other
 readings).
 """
 

@@ -35,6 +35,7 @@ from nl2policy.domains.spec import Domain, Knobs
 from nl2policy.policy.ddt import DDT, Shape
 from nl2policy.trees import MAX_DEPTH, Leaf, Node, Tree
 from nl2policy.trees.raw import RAW_PREFIX, RawTest
+from nl2policy.trees.tree import iter_nodes
 
 
 def pad_tree(tree: Tree, domain: Domain, depth: int = MAX_DEPTH) -> Tree:
@@ -53,19 +54,18 @@ def pad_tree(tree: Tree, domain: Domain, depth: int = MAX_DEPTH) -> Tree:
     return grow(tree, 0, [])
 
 
-def _shape_and_tests(tree: Tree) -> tuple[Shape, list[str], list[str]]:
-    """Pre-order numbering: the shape, each node's question, each leaf's action."""
+def _shape(tree: Tree) -> Shape:
+    """The tree's shape, nodes and leaves numbered in pre-order (``load_tree`` fills it)."""
     yes_child: list = []
     no_child: list = []
-    questions: list[str] = []
-    actions: list[str] = []
+    leaves = 0
 
     def visit(node: Tree) -> tuple[str, int]:
+        nonlocal leaves
         if isinstance(node, Leaf):
-            actions.append(node.action)
-            return ("leaf", len(actions) - 1)
-        index = len(questions)
-        questions.append(node.question)
+            leaves += 1
+            return ("leaf", leaves - 1)
+        index = len(yes_child)
         yes_child.append(None)
         no_child.append(None)
         yes_child[index] = visit(node.yes)
@@ -73,7 +73,7 @@ def _shape_and_tests(tree: Tree) -> tuple[Shape, list[str], list[str]]:
         return ("node", index)
 
     visit(tree)
-    return Shape(tuple(yes_child), tuple(no_child), len(actions)), questions, actions
+    return Shape(tuple(yes_child), tuple(no_child), leaves)
 
 
 def tree_to_ddt(domain_name: str, tree: Tree, pad: bool = False, gamma: Optional[float] = None,
@@ -84,8 +84,7 @@ def tree_to_ddt(domain_name: str, tree: Tree, pad: bool = False, gamma: Optional
     knobs = knobs or domain.knobs
     if pad:
         tree = pad_tree(tree, domain)
-    shape, _, _ = _shape_and_tests(tree)
-    ddt = DDT(shape, len(domain.features), len(domain.actions), knobs.ddt_gamma if gamma is None else gamma)
+    ddt = DDT(_shape(tree), len(domain.features), len(domain.actions), knobs.ddt_gamma if gamma is None else gamma)
     load_tree(ddt, domain_name, tree, knobs.leaf_mass)
     return ddt
 
@@ -97,7 +96,7 @@ def load_tree(ddt: DDT, domain_name: str, tree: Tree, leaf_mass: float) -> None:
     ``optimize`` uses it to move a training DDT onto a tree read from it."""
     domain = get_domain(domain_name)
     n_actions = len(domain.actions)
-    if _shape_and_tests(tree)[0].nodes != ddt.shape.nodes:
+    if sum(1 for _ in iter_nodes(tree)) != ddt.shape.nodes:
         tree = pad_tree(tree, domain)
     weights = ddt.weights.detach().clone()
     comparators = ddt.comparators.detach().clone()
@@ -200,6 +199,4 @@ def tree_batch_act_fn(domain_name: str, tree: Tree) -> Callable[[np.ndarray], np
 
 
 def has_raw_tests(tree: Tree) -> bool:
-    from nl2policy.trees.tree import iter_nodes
-
     return any(n.question.startswith(RAW_PREFIX) for n in iter_nodes(tree))

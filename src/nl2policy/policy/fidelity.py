@@ -37,15 +37,10 @@ def uniform_states(domain: str, n: int, seed: int = 0) -> np.ndarray:
     return get_domain(domain).uniform_states(n, seed)
 
 
-def tree_actions_batch(domain: str, tree: Tree, states: np.ndarray) -> np.ndarray:
-    """The tree's action index for every state (``Domain.tree_actions``: learned tests too)."""
-    return get_domain(domain).tree_actions(tree, states)
-
-
 def agreement(domain: str, tree: Tree, states: np.ndarray, pad: bool = False, gamma: float | None = None) -> float:
     """Fraction of `states` on which the fresh DDT's argmax action is the tree's action."""
-    get_domain(domain)  # an unknown domain fails here, with the known ones in its message
-    tree_actions = tree_actions_batch(domain, tree, states)
+    # an unknown domain fails here, with the known ones in its message
+    tree_actions = get_domain(domain).tree_actions(tree, states)
     ddt = tree_to_ddt(domain, tree, pad=pad, gamma=gamma)
     ddt_actions = ddt.greedy(torch.as_tensor(states)).numpy()
     return float(np.mean(ddt_actions == tree_actions))

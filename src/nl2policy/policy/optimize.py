@@ -4,20 +4,20 @@ The training loop is in plain view in ``train_checkpointed``: learn one chunk of
 the SB3 model, the step count and the episode curve so far, repeat. A killed run started
 again with the same ``out`` folder loads the checkpoint and continues from the saved step.
 
-What ``optimize_tree`` returns (``final_tree.json``) is never worse than the tree it was
-given: the best of the initial tree and every checkpoint's tree (``keep_best``), where a
-checkpoint's tree is the best of the readings of the trained DDT: its rounding; its
-distillation, the dictionary tree that acts most like it in the states PPO visited lately
-(``distill``; measured on highway, a start at 17.82 whose rounded trees never beat it came back
-at 19.53 read by distillation: results/policy/history/distilled_reading_probe.md); and, with
-the domain's ``critic_reading`` knob, the tree PPO's critic favours there (``advantage``). With
-``adopt_read_tree``, PPO continues from a checkpoint's tree wherever a reading beat the
-rounding (``tree_adopter``). Then, with ``polish``, a hill climb over questions and actions
-from it (``polish``: on the exact model where the domain has one, climbing from the start tree
-too and keeping the better end, else on common sampled scenes of its fast simulator). PPO's own
-last tree (``last_tree.json``, its last checkpoint read the same ways), the kept tree
-(``best_tree.json``) and the polished one (``polished_tree.json``) are written and scored beside
-it, so the paper's DDT + PPO and each added step are reported separately.
+What ``optimize_tree`` returns (``final_tree.json``) is never worse than the tree it was given:
+the best of the initial tree and every checkpoint's tree (``keep_best``), where a checkpoint's
+tree is the best of the readings of the trained DDT: its rounding; its distillation, the
+dictionary tree that acts most like it in the states PPO visited lately (``distill``; measured
+on highway, a start at 17.82 whose rounded trees never beat it came back at 19.53 read by
+distillation: results/policy/history/distilled_reading_probe.md); and, with the domain's
+``critic_reading`` knob, the tree PPO's critic favours there (``advantage``); the readings are
+in ``readings``. With ``adopt_read_tree``, PPO continues from a checkpoint's tree wherever a
+reading beat the rounding (``readings.tree_adopter``). Then, with ``polish``, a hill climb over
+questions and actions from it (``polish``: on the exact model where the domain has one, climbing
+from the start tree too and keeping the better end, else on common sampled scenes of its fast
+simulator). PPO's own last tree (``last_tree.json``, its last checkpoint read the same ways),
+the kept tree (``best_tree.json``) and the polished one (``polished_tree.json``) are written and
+scored beside it, so the paper's DDT + PPO and each added step are reported separately.
 """
 
 from __future__ import annotations
@@ -35,12 +35,12 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from nl2policy.domains import get_domain
 from nl2policy.domains.spec import Knobs
-from nl2policy.policy.advantage import advantage_tree
-from nl2policy.policy.convert import ddt_to_tree, has_raw_tests, load_tree, tree_act_fn
-from nl2policy.policy.distill import VisitedStates, distilled_tree
+from nl2policy.policy.convert import has_raw_tests, tree_act_fn
+from nl2policy.policy.distill import VisitedStates
 from nl2policy.policy.keep_best import keep_best, tree_from_json, tree_scorer
+from nl2policy.policy.readings import TreeScore, checkpoint_tree_score, tree_adopter
 from nl2policy.policy.rollout import evaluate, tree_policy
-from nl2policy.policy.sb3_policy import TreePPO, action_probs_fn, actor_ddt, make_ppo, make_vec_env, soft_act_fn
+from nl2policy.policy.sb3_policy import TreePPO, action_probs_fn, make_ppo, make_vec_env, soft_act_fn
 from nl2policy.trees import Tree, tree_to_json
 
 EVAL_SEED = 50_000  # evaluation episodes use seeds far from the training env's
@@ -77,55 +77,6 @@ class EpisodeLog(BaseCallback):
         if self.progress:
             self.progress(min(int(self.num_timesteps), self.total), self.total)
         return True
-
-
-TreeScore = Callable[[PPO, Optional[VisitedStates]], tuple[dict, float, str]]
-"""(model, its latest rollouts or None) -> (the tree it hands back as JSON, that tree's score, how
-the tree was read from the model: "rounded", "distilled" or "critic")."""
-
-
-def checkpoint_tree_score(domain: str, sampled: bool = False,
-                          scorer: Optional[Callable[[Tree], float]] = None,
-                          critic: Optional[bool] = None) -> Optional[TreeScore]:
-    """How to read and score the tree of the policy at each checkpoint (``keep_best.tree_scorer``),
-    or None.
-
-    Readings of the trained DDT compete: its rounding (``ddt_to_tree``: each node's strongest
-    feature, each leaf's likeliest action), and, given PPO's latest rollouts, its distillation
-    (``distill.distilled_tree``: the dictionary tree acting most like it in the states visited)
-    and, with `critic` (default: the domain's ``critic_reading`` knob), the tree its critic's
-    advantages favour there (``advantage.advantage_tree``). The best by `scorer` is the
-    checkpoint's tree (a tie keeps the earlier reading, in that order).
-
-    With an exact model (taxi): the exact expected return (~0.1 s, no sampling noise). PPO's tree
-    wanders between checkpoints (measured: results/policy/tuning_taxi.md), so the run also keeps
-    the best tree it passed through, the way one keeps the best checkpoint on a validation score.
-    Without one (highway), sampled episodes cost seconds each: only where `sampled` asks for it
-    (``optimize`` does, to return a tree never worse than its start; the Table 2 grid does too).
-    `scorer`: one already made, to share its cache of sampled scores."""
-    d = get_domain(domain)
-    if d.exact is None and not sampled:
-        return None
-    scorer = scorer or tree_scorer(domain)[0]
-    critic = d.knobs.critic_reading if critic is None else critic
-
-    def score(model: PPO, rollouts: Optional[VisitedStates] = None) -> tuple[dict, float, str]:
-        tree, read = ddt_to_tree(domain, actor_ddt(model)), "rounded"
-        value = scorer(tree)
-        states = rollouts.states() if rollouts is not None else None
-        if states is not None and len(states):
-            probs = action_probs_fn(model)
-            readings = [("distilled", lambda: distilled_tree(domain, probs, states))]
-            if critic:
-                readings.append(("critic", lambda: advantage_tree(domain, probs, states, *rollouts.taken())))
-            for name, reading in readings:
-                other = reading()
-                other_value = scorer(other)
-                if other_value > value:
-                    tree, value, read = other, other_value, name
-        return tree_to_json(tree), value, read
-
-    return score
 
 
 def anneal(model: PPO, total: int) -> None:
@@ -169,28 +120,6 @@ class Anneal(BaseCallback):
         return True
 
 
-def tree_adopter(domain: str, knobs: Optional[Knobs] = None) -> Callable[[PPO, Tree], None]:
-    """Moves a training tree-DDT onto a tree read from it (``train_checkpointed``'s `adopt`): its
-    tests and leaves are set as a fresh tree-initialized DDT's (``convert.load_tree``, the leaf
-    mass from `knobs`), and Adam's running moments for them are dropped, so that the next
-    update starts from the tree rather than from the old parameters' momentum.
-
-    Why: the critic's and the distilled readings find trees better than the DDT's own, and PPO
-    then trains the tree it will hand back, a step of policy iteration between chunks of policy
-    gradient. Measured on highway's Table 2 (results/policy/ablation_critic_adopt*/): the soft
-    policy ends within 0.5 of its tree in more runs than with the readings alone, but the kept
-    tree is lower, so no domain turns it on (the knob ``adopt_read_tree``)."""
-    leaf_mass = (knobs or get_domain(domain).knobs).leaf_mass
-
-    def adopt(model: PPO, tree: Tree) -> None:
-        ddt = actor_ddt(model)
-        load_tree(ddt, domain, tree, leaf_mass)
-        for parameter in ddt.parameters():
-            model.policy.optimizer.state.pop(parameter, None)
-
-    return adopt
-
-
 class Trained(NamedTuple):
     """What ``train_checkpointed`` hands back."""
 
@@ -217,7 +146,7 @@ def train_checkpointed(model_factory: Callable[[], PPO], domain: str, seed: int,
     given the checkpoint's tree as read above (None without `score_tree`), so what it scores is
     the tree a user would get from that checkpoint.
 
-    With `adopt` (``tree_adopter``), wherever a checkpoint's tree was read by another reading than
+    With `adopt` (``readings.tree_adopter``), wherever a checkpoint's tree was read by another reading than
     the DDT's own rounding (it scored higher), PPO continues from that tree: its DDT is set to
     act like it. The probe then measures the soft policy after the move, and records the one
     before it as ``soft_before_adopt``. Not after the last chunk: there is no training left, and
