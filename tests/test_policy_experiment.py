@@ -167,3 +167,21 @@ def test_weak_taxi_starts_are_distinct_corpus_policies_below_the_bar():
     assert {6.2057, 4.8665, 0.0} <= set(values)
     frequent = {round(s["exact"], 4) for s in starts(lowest=0)}
     assert {v for v in frequent if v < WEAK_BELOW} == set(values)  # none left out
+
+
+def test_a_climbed_ceiling_is_shown_only_when_scored_on_the_probes_own_scenes(tmp_path):
+    from experiments.policy.table2_report import climbed_ceiling
+
+    probe = {"scored_by": "100 nl2policy/lunar-train-v0 episodes from seed 50000"}
+    assert climbed_ceiling(tmp_path, "lunar", probe) is None  # no ceilings file
+    climbs = [{"start_name": "a", "fresh": {"mean": -50.0, "stderr": 2.0}},
+              {"start_name": "b", "fresh": {"mean": -30.0, "stderr": 3.0}}]
+    path = tmp_path / "ceilings_lunar.json"
+    path.write_text(json.dumps({"climbs": climbs, "best": 1, "max_depth": 3, "eval_episodes": 100, "eval_seed": 50000}))
+    assert climbed_ceiling(tmp_path, "lunar", probe) == {"mean": -30.0, "stderr": 3.0, "max_depth": 3, "start": "b"}
+    path.write_text(json.dumps({"climbs": climbs, "best": 1, "max_depth": 3, "eval_episodes": 100, "eval_seed": 7}))
+    assert climbed_ceiling(tmp_path, "lunar", probe) is None  # other scenes: not comparable
+    path.write_text(json.dumps({"climbs": climbs, "best": 1, "max_depth": 3, "eval_episodes": 20, "eval_seed": 50000}))
+    assert climbed_ceiling(tmp_path, "lunar", probe) is None
+    path.write_text(json.dumps({"optimum": 8.4}))  # an exact ceiling is the table's own yardstick
+    assert climbed_ceiling(tmp_path, "lunar", probe) is None
