@@ -113,6 +113,3 @@ MODELS.update(BASELINES)
 MODELS["v3-mix200"] = replace(MODELS["v3"], synthetic=(1000, 200), ensemble=8)
 # The candidate for v4 (its recipe ships beside v3's until it has been measured against it).
 MODELS["v4"] = load_recipe("v4")
-# A probe after v5 (2026-12-06): v3's recipe (1,000 synthetic pairs, 30 epochs) with twice the
-# hidden width, no learned findings: do deep trees (4+ questions) need a wider reader?
-MODELS["v3-h128"] = replace(MODELS["v3"], hidden=128, findings_cost=0.0)
