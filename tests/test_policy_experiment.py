@@ -170,18 +170,20 @@ def test_weak_taxi_starts_are_distinct_corpus_policies_below_the_bar():
 
 
 def test_a_climbed_ceiling_is_shown_only_when_scored_on_the_probes_own_scenes(tmp_path):
+    from experiments.policy.table2 import EVAL_SEED, probe_episodes
     from experiments.policy.table2_report import climbed_ceiling
 
-    probe = {"scored_by": "100 nl2policy/lunar-train-v0 episodes from seed 50000"}
-    assert climbed_ceiling(tmp_path, "lunar", probe) is None  # no ceilings file
+    assert (probe_episodes("lunar"), EVAL_SEED) == (100, 50000)  # the scenes the files below name
+
+    assert climbed_ceiling(tmp_path, "lunar") is None  # no ceilings file
     climbs = [{"start_name": "a", "fresh": {"mean": -50.0, "stderr": 2.0}},
               {"start_name": "b", "fresh": {"mean": -30.0, "stderr": 3.0}}]
     path = tmp_path / "ceilings_lunar.json"
     path.write_text(json.dumps({"climbs": climbs, "best": 1, "max_depth": 3, "eval_episodes": 100, "eval_seed": 50000}))
-    assert climbed_ceiling(tmp_path, "lunar", probe) == {"mean": -30.0, "stderr": 3.0, "max_depth": 3, "start": "b"}
+    assert climbed_ceiling(tmp_path, "lunar") == {"mean": -30.0, "stderr": 3.0, "max_depth": 3, "start": "b"}
     path.write_text(json.dumps({"climbs": climbs, "best": 1, "max_depth": 3, "eval_episodes": 100, "eval_seed": 7}))
-    assert climbed_ceiling(tmp_path, "lunar", probe) is None  # other scenes: not comparable
+    assert climbed_ceiling(tmp_path, "lunar") is None  # other scenes: not comparable
     path.write_text(json.dumps({"climbs": climbs, "best": 1, "max_depth": 3, "eval_episodes": 20, "eval_seed": 50000}))
-    assert climbed_ceiling(tmp_path, "lunar", probe) is None
+    assert climbed_ceiling(tmp_path, "lunar") is None
     path.write_text(json.dumps({"optimum": 8.4}))  # an exact ceiling is the table's own yardstick
-    assert climbed_ceiling(tmp_path, "lunar", probe) is None
+    assert climbed_ceiling(tmp_path, "lunar") is None
