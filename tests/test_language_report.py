@@ -126,6 +126,24 @@ def test_experiment_never_runs_a_fold_twice(tmp_path, monkeypatch):
     assert all(r["workers"] == 2 for r in records)  # and how (its seconds depend on it)
 
 
+def test_an_experiment_can_run_chosen_folds_first_and_the_rest_later(tmp_path, monkeypatch):
+    from experiments.translation import evaluate
+
+    keys, job = [], evaluate.Job
+    monkeypatch.setattr(evaluate, "run_fold", lambda *a, **k: {"n": 1, "valid": 1, "tree_acc": 1.0, "token_acc": 1.0,
+                                                                "policy_acc": 1.0, "train_pairs": 1, "seconds": 0.0})
+    monkeypatch.setattr(evaluate, "Job", lambda name, fn, kwargs, cpus: (keys.append(kwargs["key"]),
+                                                                         job(name, fn, kwargs, cpus))[1])
+    plan = [("taxi", "m", "new", 1)]
+    with pytest.raises(evaluate.UnknownFold, match="new-f9"):
+        evaluate.run_experiment(plan, tmp_path, only_folds=["new-f1", "new-f9"])
+    assert not (tmp_path / "runs.jsonl").exists()  # refused before any fold ran
+    evaluate.run_experiment(plan, tmp_path, only_folds=["new-f3", "new-f1"])
+    assert keys[-2:] == ["new-f1", "new-f3"]  # in plan order, only those
+    evaluate.run_experiment(plan, tmp_path)  # the rest, resumed
+    assert keys[-2:] == ["new-f0", "new-f2"]
+
+
 def test_unseen_trees_are_the_test_trees_no_training_description_has():
     from nl2policy.language.corpus import load_corpus
     from experiments.translation.evaluate import unseen_trees

@@ -187,3 +187,47 @@ def test_a_climbed_ceiling_is_shown_only_when_scored_on_the_probes_own_scenes(tm
     assert climbed_ceiling(tmp_path, "lunar") is None
     path.write_text(json.dumps({"optimum": 8.4}))  # an exact ceiling is the table's own yardstick
     assert climbed_ceiling(tmp_path, "lunar") is None
+
+
+def _example_run(folder, tree: dict, seed: int, kept: float, polished, start: float = -70.0) -> None:
+    """A finished tree-DDT run folder as `table2` leaves it, with only what the example reads."""
+    run = {"seed": seed, "steps": 1000, "tree": tree, "kept_tree": tree, "kept_score": kept, "kept_judged": kept - 1,
+           "initial_tree_judged": start, "judged_by": "10 test episodes"}
+    if polished is not None:
+        run.update(polished_tree={"do": "main_engine"}, polished_score=polished, polished_judged=polished - 1)
+    path = folder / "lunar" / "runs" / f"tree_ddt_t0_s{seed}"
+    path.mkdir(parents=True)
+    (path / "result.json").write_text(json.dumps(run))
+
+
+def test_the_worked_example_gathers_the_runs_that_start_from_the_example_tree(tmp_path):
+    from experiments.policy.example import NoExampleRuns, write_example
+    from nl2policy.domains import get_domain
+    from nl2policy.trees.parse import tree_to_json
+
+    with pytest.raises(NoExampleRuns, match="no finished tree-DDT run"):
+        write_example("lunar", tmp_path, "cmd")
+    start = tree_to_json(get_domain("lunar").example_tree)
+    _example_run(tmp_path, start, 0, kept=-70.0, polished=-20.0)   # handed back: polished, judged -21
+    _example_run(tmp_path, start, 1, kept=-60.0, polished=None)    # handed back: kept, judged -61
+    _example_run(tmp_path, start, 2, kept=-50.0, polished=-80.0)   # polish lost: kept, judged -51
+    _example_run(tmp_path, {"do": "nothing"}, 3, kept=0.0, polished=None)  # another start: not this example
+    text = write_example("lunar", tmp_path, "cmd").read_text()
+    assert "seed 0: -21.0, seed 1: -61.0, seed 2: -51.0;" in text and "seed 3" not in text
+    assert "better than the start in 3 of 3" in text
+    assert "run with the median return of the tree handed back, seed 2" in text
+    assert "Made by: `cmd`" in text
+
+
+def test_the_readme_quotes_the_committed_worked_example():
+    """The README's lunar example is the one `python -m experiments.policy example` wrote, not typed in."""
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    report = (root / "results" / "policy" / "example_lunar.md").read_text()
+    readme = (root / "README.md").read_text()
+    blocks = re.findall(r"```text\n(.*?)```", report, re.S)
+    assert len(blocks) == 2 and all(block in readme for block in blocks)
+    for number in re.findall(r"\*\*(-?[\d.]+)\*\*", report):
+        assert number in readme

@@ -4,6 +4,7 @@
     .venv/bin/python -m experiments.policy viper --domain highway --seeds 5 --out results/policy
     .venv/bin/python -m experiments.policy fidelity --states 10000 --out results/policy
     .venv/bin/python -m experiments.policy corpus-returns --domain taxi --out results/foundation
+    .venv/bin/python -m experiments.policy example --domain lunar --out results/policy
 
 Outside the product: it imports the package, the package never imports it. Each command writes
 its table with the command that made it; `table2 --ray` runs its grid on Ray (``experiments.grid``).
@@ -137,6 +138,23 @@ def viper(
             bar.update(task, completed=seed + 1)
             write_viper_table(domain, results, out, command)
     console.print((out / f"viper_{domain}.md").read_text())
+
+
+@app.command()
+def example(
+    domain: str = typer.Option("lunar", help=f"One of: {', '.join(DOMAINS)}"),
+    out: Path = typer.Option(Path("results/policy"), help="Table 2's folder: its runs are read, example_DOMAIN.md written"),
+) -> None:
+    """The README's worked example: the domain's example, its translation, and Table 2's optimized trees from it."""
+    from experiments.policy.example import NoExampleRuns, write_example
+    from nl2policy.console import console, domain_or_fail, fail
+
+    domain_or_fail(domain)
+    try:
+        path = write_example(domain, out, f"python -m experiments.policy example --domain {domain} --out {out}")
+    except NoExampleRuns as exc:
+        fail(str(exc))
+    console.print(path.read_text(), markup=False, highlight=False, soft_wrap=True)
 
 
 @app.command()

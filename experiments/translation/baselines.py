@@ -113,3 +113,5 @@ MODELS.update(BASELINES)
 MODELS["v3-mix200"] = replace(MODELS["v3"], synthetic=(1000, 200), ensemble=8)
 # The candidate for v4 (its recipe ships beside v3's until it has been measured against it).
 MODELS["v4"] = load_recipe("v4")
+# Probe: v4 with twice its epochs (deep trees looked short of training steps: results/translation/history/v5).
+MODELS["v4-e40"] = replace(MODELS["v4"], epochs=40)

@@ -198,11 +198,16 @@ def fold_job(domain: str, name: str, protocol: str, repeats: int, key: str, work
     return result
 
 
+class UnknownFold(ValueError):
+    """A fold key asked for (--fold) that the plan does not have."""
+
+
 def run_experiment(plan: Sequence[tuple[str, str, str, int]], out: Path,
                    progress: Optional[Callable[[str], None]] = None, workers: int = 1,
                    keep_networks: Optional[Path] = None, networks_from: Optional[Path] = None,
-                   ray: Optional[str] = None) -> Path:
+                   ray: Optional[str] = None, only_folds: Sequence[str] = ()) -> Path:
     """`plan`: (domain, model, protocol, repeats). Appends each fold to out/runs.jsonl.
+    `only_folds`: fold keys (e.g. new-f1) to run, the others skipped; empty = all.
     `workers`: processes training an ensemble's members side by side (train.fit); the folds'
     results are the same as with one, only the recorded seconds change. `keep_networks`: a folder
     to save each fold's networks in (DOMAIN-MODEL-FOLD.pt); `networks_from`: such a folder, whose
@@ -214,16 +219,22 @@ def run_experiment(plan: Sequence[tuple[str, str, str, int]], out: Path,
     runs = out / "runs.jsonl"
     done = {(r["domain"], r["model"], r["fold"]) for r in read_runs(runs)}
     jobs = []
+    planned_keys = set()
     for domain, name, protocol, repeats in plan:
         specs = load_corpus(domain, rounds=PROTOCOL_ROUNDS[protocol])
         for key, _, _ in plan_folds(specs, protocol, repeats):
-            if (domain, name, key) in done:
+            planned_keys.add(key)
+            if (domain, name, key) in done or (only_folds and key not in only_folds):
                 continue
             done.add((domain, name, key))  # a later plan step (e.g. cv3 after cv1) must not redo it
             jobs.append(Job(f"{domain} {name} {key}", fold_job,
                             {"domain": domain, "name": name, "protocol": protocol, "repeats": repeats, "key": key,
                              "workers": workers, "keep_networks": keep_networks, "networks_from": networks_from},
                             cpus=workers))
+
+    unknown = sorted(set(only_folds) - planned_keys)
+    if unknown:
+        raise UnknownFold(f"no fold of the plan is called {', '.join(unknown)} (the plan's folds: {', '.join(sorted(planned_keys))})")
 
     def record(job: Job, result: dict) -> None:
         with runs.open("a") as fh:
