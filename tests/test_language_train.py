@@ -385,3 +385,32 @@ def test_a_list_of_synthetic_counts_gives_members_their_own_count_in_turn():
         dataclasses.replace(cfg, member_draws=False)
     with pytest.raises(ValueError, match="whole numbers"):
         ModelConfig("flat", "tree", False, [3, -1], member_draws=True)
+
+
+def test_length_norm_ranks_the_beam_by_log_probability_per_node(one_torch_thread):
+    """With length_norm the beam's finished trees come back ordered by score / nodes, the score
+    itself staying the sum of node log-probabilities; at 0 the order is by the sum. Ranking per
+    node lets larger trees through where the sum would favour the smaller."""
+    from nl2policy.language.decoding import search
+    from nl2policy.language.translator import collate
+
+    specs = load_corpus("highway")
+    cfg = dataclasses.replace(MODELS["smoke"], epochs=3, batch=16, beam=4)
+    model = fit("highway", "one", cfg, [(s.description, s.tree) for s in specs[:48]], seed=0)
+    texts = [s.description for s in specs[48:64]]
+    batch = collate([model.encode(t) for t in texts])
+    size = lambda decoded: [len(to_tokens(t)) for t, _ in decoded]
+    plain = model.predict(texts)
+    for norm in (0.0, 1.0):
+        model.length_norm = norm
+        with torch.inference_mode():
+            found = search(model, batch, texts)
+        assert len({len(to_tokens(tree)) for hyps in found for tree, _, _ in hyps}) > 2  # trees of many sizes to rank
+        for text, hyps in zip(texts, found):
+            ranks = [score / len(to_tokens(tree)) ** norm for tree, _, score in hyps]
+            assert ranks == sorted(ranks, reverse=True)
+            for tree, probs, score in hyps:
+                assert score == pytest.approx(sum(math.log(p) for p in probs.values()), abs=1e-4)
+    assert sum(size(model.predict(texts))) > sum(size(plain))
+    model.length_norm = 0.0
+    assert model.predict(texts) == plain

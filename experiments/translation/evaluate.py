@@ -20,7 +20,7 @@ from nl2policy.domains import get_domain
 from experiments.grid import Job, run_jobs
 from nl2policy.language.corpus import Spec, kfold, load_corpus, new_writer_folds, policy_key
 from nl2policy.language.dataset import member_pairs
-from nl2policy.language.models.config import MODELS, networks_config
+from nl2policy.language.models.config import MODELS, ModelConfig, networks_config
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.findings import FindingsModel, train_findings
 from nl2policy.language.train import fit
@@ -34,7 +34,8 @@ from nl2policy.trees.parse import validate
 # label in the summary)
 DECODING_ALTERNATIVES = {"greedy_tree_acc": ("beam", 1, "greedy (beam of 1)"),
                          "first_3_members_tree_acc": ("ensemble", 3, "its first 3 members"),
-                         "no_findings_tree_acc": ("findings_cost", 0.0, "no learned findings")}
+                         "no_findings_tree_acc": ("findings_cost", 0.0, "no learned findings"),
+                         "summed_score_tree_acc": ("length_norm", 0.0, "trees ranked by summed log-probability")}
 
 
 def slot_accuracy(pred: Tree, gold: Tree) -> float:
@@ -91,7 +92,8 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
         model.findings = train_findings(domain, pairs(0) if callable(pairs) else pairs, seed + cfg.seed_offset, cache)
     if keep is not None:
         keep.parent.mkdir(parents=True, exist_ok=True)
-        torch.save({"domain": domain, "name": name, "words": model.words.itos[2:], "machine": machine(),
+        torch.save({"domain": domain, "name": name, "cfg": networks_config(model.cfg).to_dict(),
+                    "words": model.words.itos[2:], "machine": machine(),
                     "nets": [net.state_dict() for net in model.nets], "train": list(train_idx), "test": list(test_idx),
                     "findings": model.findings.state() if model.findings is not None else None}, keep)
     texts = [specs[i].description for i in test_idx]
@@ -255,7 +257,9 @@ def kept_networks(folder: Path, domain: str, name: str, key: str, train_idx: Seq
     want = networks_config(MODELS[name])
     for path in sorted(folder.glob(f"{domain}-*-{key}.pt")):
         saved = torch.load(path, weights_only=False)
-        if saved["domain"] == domain and saved["name"] in MODELS and networks_config(MODELS[saved["name"]]) == want \
+        # what trained them: recorded with them (older files: their model's registration, if it is still there)
+        trained = ModelConfig(**saved["cfg"]) if "cfg" in saved else MODELS.get(saved["name"])
+        if saved["domain"] == domain and trained is not None and networks_config(trained) == want \
                 and saved["train"] == list(train_idx) and saved["test"] == list(test_idx) \
                 and len(saved["nets"]) >= MODELS[name].ensemble:
             return saved

@@ -55,6 +55,7 @@ def search(model: TrainedTranslator, batch: Batch, texts: list[str], found: Opti
     names = model.tree_tokens
     index = {t: i for i, t in enumerate(names)}
     findings_cost = model.decoding("findings_cost")
+    length_norm = model.decoding("length_norm")
     B, K = len(texts), max(1, width or model.beam or model.cfg.beam)
     if not findings_cost or model.findings is None:
         found = None
@@ -119,7 +120,13 @@ def search(model: TrainedTranslator, batch: Batch, texts: list[str], found: Opti
                 logp = logp + findings_cost * root_prior.repeat_interleave(K, 0)
         logp[done] = torch.where(mask[done], 0.0, -math.inf)
         total = (score.view(B * K, 1) + logp).view(B, K * len(names))
-        best, flat = total.topk(K, -1)  # ties keep the lower index: greedy's argmax when K = 1
+        if length_norm:  # rank by log-probability per node: a finished small tree against a growing larger one
+            nodes = torch.tensor([len(q) + (s is not None) for q, s in zip(prefixes, slots)], dtype=torch.float)
+            ranked = (total.view(B * K, -1) / nodes.clamp(min=1)[:, None] ** length_norm).view(B, -1)
+            flat = ranked.topk(K, -1).indices  # ties keep the lower index: greedy's argmax when K = 1
+            best = total.gather(1, flat)
+        else:
+            best, flat = total.topk(K, -1)  # ties keep the lower index: greedy's argmax when K = 1
         source = (torch.arange(B)[:, None] * K + flat // len(names)).view(-1)
         choice = (flat % len(names)).view(-1)
         score = best
@@ -140,9 +147,10 @@ def search(model: TrainedTranslator, batch: Batch, texts: list[str], found: Opti
     flat = score.view(-1).tolist()
     trees = [from_tokens(p, vocab) if math.isfinite(flat[r]) and p and next_slot(p, vocab) is None else None
              for r, p in enumerate(prefixes)]
+    rank = [f / max(1, len(p)) ** length_norm if length_norm else f for f, p in zip(flat, prefixes)]
     out = []
     for b in range(B):  # beams stay sorted, but finished ones may have been overtaken
-        rows = sorted((r for r in range(b * K, b * K + K) if trees[r] is not None), key=lambda r: -flat[r])
+        rows = sorted((r for r in range(b * K, b * K + K) if trees[r] is not None), key=lambda r: -rank[r])
         out.append([(trees[r], probs[r], flat[r]) for r in rows] or [(None, {}, -math.inf)])
     return out
 

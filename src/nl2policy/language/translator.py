@@ -45,6 +45,7 @@ class TrainedTranslator:
     findings_cost: Optional[float] = None  # weight of the learned findings in decoding (see ModelConfig); None: the config's
     findings: Optional[FindingsModel] = field(default=None, repr=False)  # the learned findings (language/findings.py)
     ensemble: Optional[int] = None  # decode with the first n networks only; None: all of them
+    length_norm: Optional[float] = None  # the beam's ranking, log-probability / nodes ** length_norm; None: the config's
     stack_members: bool = True  # flat encoders: decode all members as one batch (False: one by one, same result)
 
     def decoding(self, setting: str) -> float:

@@ -27,6 +27,7 @@ class ModelConfig:
     minilm_layers: int = 3  # MiniLM transformer layers run (of 6): accuracy against latency
     seed_offset: int = 0  # added to every member's seed and draw: another training run of the same recipe
     findings_cost: float = 0.0  # decoding: weight of the learned findings' log-agreement (language/findings.py)
+    length_norm: float = 0.0  # decoding: the beam ranks trees by log-probability / nodes ** length_norm (0 = the sum)
 
     def __post_init__(self) -> None:
         if isinstance(self.synthetic, list):  # a recipe file's list: a tuple keeps the config hashable
@@ -51,7 +52,7 @@ class ModelConfig:
         return asdict(self)
 
 
-DECODING_FIELDS = ("ensemble", "beam", "findings_cost")
+DECODING_FIELDS = ("ensemble", "beam", "findings_cost", "length_norm")
 """The settings that change only how trained networks are decoded (`ensemble`: how many of them)."""
 
 
