@@ -113,9 +113,3 @@ MODELS.update(BASELINES)
 MODELS["v3-mix200"] = replace(MODELS["v3"], synthetic=(1000, 200), ensemble=8)
 # The candidate for v4 (its recipe ships beside v3's until it has been measured against it).
 MODELS["v4"] = load_recipe("v4")
-# Probe: v4 with twice its epochs (deep trees looked short of training steps: results/translation/history/v5).
-MODELS["v4-e40"] = replace(MODELS["v4"], epochs=40)
-# Probe: v5's kept networks (v4's generator, 4,000 synthetic pairs, 10 epochs, no findings; lost on
-# NWNT, results/translation/history/v5) with the beam ranking trees by mean log-probability per
-# node (length_norm 1, set before any run): most of the deep trees v3-v5 missed came back smaller.
-MODELS["v5-mean"] = replace(MODELS["v4"], synthetic=4000, epochs=10, findings_cost=0.0, length_norm=1.0)

@@ -27,6 +27,7 @@ import argparse
 import dataclasses
 import json
 from pathlib import Path
+from typing import Optional
 
 import torch
 
@@ -50,12 +51,15 @@ def held_out(domain: str, kept: dict, key: str) -> tuple[list, list]:
     return [specs[i].description for i in kept["test"]], [specs[i].tree for i in kept["test"]]
 
 
-def tree_accuracy(domain: str, words: list, nets: list, findings: dict, texts: list, golds: list,
-                  cache: MiniLMCache) -> float:
-    """Exact tree accuracy of `nets` decoded as one ensemble with v3's decoding (beam 4, findings weight 1)."""
-    cfg = dataclasses.replace(MODELS["v3"], ensemble=len(nets))
+def tree_accuracy(domain: str, words: list, nets: list, findings: Optional[dict], texts: list, golds: list,
+                  cache: MiniLMCache, length_norm: float = 0.0) -> float:
+    """Exact tree accuracy of `nets` decoded as one ensemble with v3's decoding (beam 4, findings weight 1;
+    `findings` None: decoded without findings), the beam ranked with `length_norm`."""
+    cfg = dataclasses.replace(MODELS["v3"], ensemble=len(nets), findings_cost=1.0 if findings else 0.0,
+                              length_norm=length_norm)
     model = TrainedTranslator.from_states(domain, "v3", cfg, words, nets, cache)
-    model.findings = FindingsModel.from_state(findings, cache)
+    if findings:
+        model.findings = FindingsModel.from_state(findings, cache)
     return score(domain, [t for t, _ in model.predict(texts)], golds)["tree_acc"]
 
 
@@ -73,6 +77,8 @@ def main() -> None:
     parser.add_argument("--b", type=Path, help="kept networks of recipe B (a folder)")
     parser.add_argument("--mix", type=Path, help="kept networks of one recipe whose members alternate two synthetic counts")
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--no-findings", action="store_true",
+                        help="with --a and --b: decode without learned findings, members' sums and means per node")
     args = parser.parse_args()
     mix_alone = args.mix is not None and args.a is None and args.b is None
     pair_alone = args.mix is None and args.a is not None and args.b is not None
@@ -95,10 +101,16 @@ def main() -> None:
             raise SystemExit(f"{key}: the two folders' networks are not of the same fold")
         texts, golds = held_out(args.domain, b, key)
         line = {"domain": args.domain, "fold": key, "n": len(texts), "a_model": a["name"], "b_model": b["name"]}
-        for label, nets, findings in (("a", a["nets"], a["findings"]), ("b", b["nets"], b["findings"]),
-                                      ("a+b, b's findings", a["nets"] + b["nets"], b["findings"]),
-                                      ("a+b, a's findings", a["nets"] + b["nets"], a["findings"])):
-            line[label] = tree_accuracy(args.domain, b["words"], nets, findings, texts, golds, cache)
+        variants = [("a", a["nets"], a["findings"], 0.0), ("b", b["nets"], b["findings"], 0.0),
+                    ("a+b, b's findings", a["nets"] + b["nets"], b["findings"], 0.0),
+                    ("a+b, a's findings", a["nets"] + b["nets"], a["findings"], 0.0)]
+        if args.no_findings:  # the same members decoded without findings, summed and per-node ranking
+            variants = [(label, nets, None, norm) for norm in (0.0, 1.0)
+                        for label, nets in ((f"a{', mean per node' * bool(norm)}", a["nets"]),
+                                            (f"b{', mean per node' * bool(norm)}", b["nets"]),
+                                            (f"a+b{', mean per node' * bool(norm)}", a["nets"] + b["nets"]))]
+        for label, nets, findings, norm in variants:
+            line[label] = tree_accuracy(args.domain, b["words"], nets, findings, texts, golds, cache, norm)
         append_line(args.out, line)
 
 
