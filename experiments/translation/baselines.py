@@ -113,8 +113,3 @@ MODELS.update(BASELINES)
 MODELS["v3-mix200"] = replace(MODELS["v3"], synthetic=(1000, 200), ensemble=8)
 # The candidate for v4 (its recipe ships beside v3's until it has been measured against it).
 MODELS["v4"] = load_recipe("v4")
-# Probe after v5 (2026-12-07): on the hardest NWNT writer (taxi new-f1) fresh synthetic pairs helped
-# (v3's 1,000 a member: 53.3 without findings; v4's 2,000 and v5's 4,000: 66.7) and more epochs on
-# the same pairs did not (v4 at 40 epochs: 60.0). So: 8,000 pairs a member for v5's 10 epochs, no
-# findings, the beam ranked per node (length_norm 1, a small gain on every fold decoded so far).
-MODELS["v6-8k"] = replace(MODELS["v4"], synthetic=8000, epochs=10, findings_cost=0.0, length_norm=1.0)
