@@ -32,7 +32,7 @@ from nl2policy.domains import get_domain
 from nl2policy.language.clarify import Answer, agrees, situations
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.findings import FindingsModel
-from nl2policy.language.models.config import MODELS, ModelConfig
+from nl2policy.language.models.config import MODELS, ModelConfig, networks_config
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.translate import LoadedModel, find_model, translate_with
 from nl2policy.language.translator import TrainedTranslator
@@ -40,10 +40,16 @@ from nl2policy.trees import Tree, parse_tree, to_tokens
 from nl2policy.trees.parse import validate
 
 
-def load_networks(path: Path, cache: MiniLMCache) -> LoadedModel:
-    """A shipped model file or a fold's kept networks (whose config is its model name's)."""
+def load_networks(path: Path, cache: MiniLMCache, decode_as: Optional[str] = None) -> LoadedModel:
+    """A shipped model file or a fold's kept networks (the config saved with them; older kept
+    files: their model name's). `decode_as`: a registered model that trains the same networks,
+    whose decoding settings (beam, findings, ranking) are used instead."""
     data = torch.load(path, weights_only=False)
     cfg = ModelConfig(**data["cfg"]) if "cfg" in data else MODELS[data["name"]]
+    if decode_as is not None:
+        if networks_config(MODELS[decode_as]) != networks_config(cfg):
+            raise ValueError(f"{path} holds networks that {decode_as} does not train")
+        cfg = MODELS[decode_as]
     translator = TrainedTranslator.from_states(data["domain"], data["name"], cfg, data["words"], data["nets"], cache)
     if data.get("findings") is not None:
         translator.findings = FindingsModel.from_state(data["findings"], cache)
@@ -130,6 +136,8 @@ def main(argv: Optional[list[str]] = None) -> None:
     parser.add_argument("--folds", type=Path, help="a --keep-networks folder: each fold's networks on its own test specs")
     parser.add_argument("--fold-model", default=None, help="only the folds of this model name (default: all)")
     parser.add_argument("--protocol", default="new", help="only the folds of this protocol (default: new)")
+    parser.add_argument("--decode-as", default=None, help="with --folds: decode the kept networks with this registered "
+                                                       "model's decoding settings (a model that trains the same networks)")
     parser.add_argument("--max-questions", type=int, default=3)
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args(argv)
@@ -146,7 +154,11 @@ def main(argv: Optional[list[str]] = None) -> None:
             parser.error(f"no {args.protocol} fold networks of {args.domain} in {args.folds}")
         for path in paths:
             saved = torch.load(path, weights_only=False)
-            jobs.append((path.stem, load_networks(path, cache),
+            try:
+                loaded = load_networks(path, cache, args.decode_as)
+            except (KeyError, ValueError) as exc:
+                parser.error(f"{path}: cannot decode its networks ({exc})")
+            jobs.append((path.stem, loaded,
                          [(specs[i].description, specs[i].tree, specs[i].id) for i in saved["test"]]))
     else:
         vocab = get_domain(args.domain).vocab

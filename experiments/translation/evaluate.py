@@ -92,7 +92,7 @@ def run_fold(domain: str, specs: Sequence[Spec], train_idx: Sequence[int], test_
         model.findings = train_findings(domain, pairs(0) if callable(pairs) else pairs, seed + cfg.seed_offset, cache)
     if keep is not None:
         keep.parent.mkdir(parents=True, exist_ok=True)
-        torch.save({"domain": domain, "name": name, "cfg": networks_config(model.cfg).to_dict(),
+        torch.save({"domain": domain, "name": name, "cfg": model.cfg.to_dict(),
                     "words": model.words.itos[2:], "machine": machine(),
                     "nets": [net.state_dict() for net in model.nets], "train": list(train_idx), "test": list(test_idx),
                     "findings": model.findings.state() if model.findings is not None else None}, keep)
