@@ -27,12 +27,12 @@ from typing import Optional
 import torch
 
 import experiments.translation.baselines  # noqa: F401  (registers the lab's model names)
-from experiments.translation.evaluate import PROTOCOL_ROUNDS
+from experiments.translation.evaluate import PROTOCOL_ROUNDS, trained_config
 from nl2policy.domains import get_domain
 from nl2policy.language.clarify import Answer, agrees, situations
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.findings import FindingsModel
-from nl2policy.language.models.config import MODELS, ModelConfig, networks_config
+from nl2policy.language.models.config import MODELS, networks_config
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.translate import LoadedModel, find_model, translate_with
 from nl2policy.language.translator import TrainedTranslator
@@ -40,15 +40,18 @@ from nl2policy.trees import Tree, parse_tree, to_tokens
 from nl2policy.trees.parse import validate
 
 
-def load_networks(path: Path, cache: MiniLMCache, decode_as: Optional[str] = None) -> LoadedModel:
-    """A shipped model file or a fold's kept networks (the config saved with them; older kept
-    files: their model name's). `decode_as`: a registered model that trains the same networks,
+def load_networks(data: dict, cache: MiniLMCache, decode_as: Optional[str] = None) -> LoadedModel:
+    """A loaded shipped model file or fold's kept networks, decoded as the config that trained
+    them (`trained_config`). `decode_as`: a registered model that trains the same networks,
     whose decoding settings (beam, findings, ranking) are used instead."""
-    data = torch.load(path, weights_only=False)
-    cfg = ModelConfig(**data["cfg"]) if "cfg" in data else MODELS[data["name"]]
+    cfg = trained_config(data)
+    if cfg is None:
+        raise ValueError(f"nothing records what trained these networks (model {data['name']!r} is not registered)")
     if decode_as is not None:
+        if decode_as not in MODELS:
+            raise ValueError(f"no model is registered as {decode_as!r}")
         if networks_config(MODELS[decode_as]) != networks_config(cfg):
-            raise ValueError(f"{path} holds networks that {decode_as} does not train")
+            raise ValueError(f"{decode_as} does not train these networks")
         cfg = MODELS[decode_as]
     translator = TrainedTranslator.from_states(data["domain"], data["name"], cfg, data["words"], data["nets"], cache)
     if data.get("findings") is not None:
@@ -155,8 +158,8 @@ def main(argv: Optional[list[str]] = None) -> None:
         for path in paths:
             saved = torch.load(path, weights_only=False)
             try:
-                loaded = load_networks(path, cache, args.decode_as)
-            except (KeyError, ValueError) as exc:
+                loaded = load_networks(saved, cache, args.decode_as)
+            except ValueError as exc:
                 parser.error(f"{path}: cannot decode its networks ({exc})")
             jobs.append((path.stem, loaded,
                          [(specs[i].description, specs[i].tree, specs[i].id) for i in saved["test"]]))
@@ -164,7 +167,7 @@ def main(argv: Optional[list[str]] = None) -> None:
         vocab = get_domain(args.domain).vocab
         rows = [json.loads(line) for line in args.data.read_text().splitlines() if line.strip()]
         model = args.model or find_model(args.domain)
-        jobs.append(("data", load_networks(model, cache),
+        jobs.append(("data", load_networks(torch.load(model, weights_only=False), cache),
                      [(r["description"], parse_tree(r["tree"], vocab), r.get("id", str(i))) for i, r in enumerate(rows)]))
     args.out.mkdir(parents=True, exist_ok=True)
     all_rows, by_fold = [], {}

@@ -257,9 +257,11 @@ def test_a_fold_can_decode_the_networks_another_model_trained_on_it(monkeypatch,
     assert saved is not None and saved["name"] == "tiny"
     assert evaluate.kept_networks(tmp_path, "taxi", "tiny-longer", "cv-r0-f0", train, test) is None  # other training
     assert evaluate.kept_networks(tmp_path, "taxi", "tiny-first", "cv-r0-f0", train[1:], test) is None  # other fold
+    import torch
+
     from experiments.clarify import load_networks  # the simulated user decodes kept networks as saved, or as another model
 
-    kept = tmp_path / "taxi-tiny-cv-r0-f0.pt"
+    kept = torch.load(tmp_path / "taxi-tiny-cv-r0-f0.pt", weights_only=False)
     assert load_networks(kept, MiniLMCache()).translator.cfg == MODELS["tiny"]
     assert load_networks(kept, MiniLMCache(), decode_as="tiny-first").translator.cfg.beam == 2
     with pytest.raises(ValueError, match="does not train"):

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.policy.table2 import JUDGED
+from experiments.policy.table2 import JUDGED, returned_tree
 from nl2policy.domains import get_domain
 from nl2policy.trees.parse import parse_tree
 from nl2policy.trees.render import to_text
@@ -37,9 +37,8 @@ def example_runs(out: Path, domain: str, start: Tree, vocab: Vocabulary) -> list
 def returned(run: dict) -> tuple[dict, float]:
     """What `optimize` handed back in `run` (the better of the kept and polished trees by the
     scores it chose them on, as Table 2's 'returned' column) and its score on the probe's scenes."""
-    polished = "polished_score" in run and run["polished_score"] > run["kept_score"]
-    key = "polished" if polished else "kept"
-    return run[f"{key}_tree"], run[JUDGED[f"{key}_score"]]
+    which = returned_tree(run)
+    return run[f"{which}_tree"], run[JUDGED[f"{which}_score"]]
 
 
 def write_example(domain: str, out: Path, command: str) -> Path:
@@ -55,8 +54,8 @@ def write_example(domain: str, out: Path, command: str) -> Path:
     start_score = runs[0][JUDGED["initial_tree_score"]]
     handed = [returned(r) for r in runs]
     scores = np.array([s for _, s in handed])
-    median_seed = int(np.argsort(scores, kind="stable")[len(scores) // 2])  # the run whose returned score is the median
-    tree, score = handed[median_seed]
+    median = int(np.argsort(scores, kind="stable")[len(scores) // 2])  # the run whose returned score is the median
+    tree, score = handed[median]
     seeds = ", ".join(f"seed {r['seed']}: {s:.1f}" for r, (_, s) in zip(runs, handed))
     scenes = runs[0]["judged_by"]
     lines = [
@@ -83,7 +82,7 @@ def write_example(domain: str, out: Path, command: str) -> Path:
         "",
         f"Its mean return: **{start_score:.1f}**.",
         "",
-        f"After `optimize` (the run with the median return of the tree handed back, seed {runs[median_seed]['seed']}):",
+        f"After `optimize` (the run with the median return of the tree handed back, seed {runs[median]['seed']}):",
         "",
         "```text",
         to_text(parse_tree(tree, d.vocab), d.vocab),

@@ -294,6 +294,12 @@ JUDGED = {"initial_tree_score": "initial_tree_judged", "kept_score": "kept_judge
 """A tree's score on the scenes it was chosen on -> its score on the probe's scenes."""
 
 
+def returned_tree(run: dict) -> str:
+    """Which tree `optimize` handed back in a DDT run: "polished" where the polish beat the kept
+    tree on the scores it chose them on, else "kept" (the run's `<which>_tree`, `<which>_score`)."""
+    return "polished" if "polished_score" in run and run["polished_score"] > run["kept_score"] else "kept"
+
+
 def judge_trees(domain: str, result: dict) -> bool:
     """Score the start, kept and polished trees of a DDT run again on the probe's scenes, where
     the domain has no exact model; True if anything was added.
@@ -377,8 +383,7 @@ def summarize(results: list[dict], domain: str, yardsticks: dict, level: float =
                 entry[key] = _stats([r[name(key)] for r in rows])
         if all(name("kept_score") in r for r in rows):  # what optimize hands back: the better of kept and polished
             for r in rows:
-                polished = "polished_score" in r and r["polished_score"] > r["kept_score"]
-                r["returned_score"] = r[name("polished_score" if polished else "kept_score")]
+                r["returned_score"] = r[name(f"{returned_tree(r)}_score")]
             entry["returned_score"] = _stats([r["returned_score"] for r in rows])
         if all(name("initial_tree_score") in r for r in rows):
             entry["initial_tree_score"] = _stats([r[name("initial_tree_score")] for r in rows])

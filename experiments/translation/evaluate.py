@@ -246,6 +246,12 @@ def run_experiment(plan: Sequence[tuple[str, str, str, int]], out: Path,
     return runs
 
 
+def trained_config(saved: dict) -> Optional[ModelConfig]:
+    """The config that trained a saved model or fold's networks: recorded with them (a shipped
+    file, a kept fold), or for older kept files their model's registration, None where it is gone."""
+    return ModelConfig(**saved["cfg"]) if "cfg" in saved else MODELS.get(saved["name"])
+
+
 def kept_networks(folder: Path, domain: str, name: str, key: str, train_idx: Sequence[int],
                   test_idx: Sequence[int]) -> Optional[dict]:
     """A fold's saved networks (run_fold's `keep`) that `name` can decode as its own, or None: the
@@ -257,8 +263,7 @@ def kept_networks(folder: Path, domain: str, name: str, key: str, train_idx: Seq
     want = networks_config(MODELS[name])
     for path in sorted(folder.glob(f"{domain}-*-{key}.pt")):
         saved = torch.load(path, weights_only=False)
-        # what trained them: recorded with them (older files: their model's registration, if it is still there)
-        trained = ModelConfig(**saved["cfg"]) if "cfg" in saved else MODELS.get(saved["name"])
+        trained = trained_config(saved)
         if saved["domain"] == domain and trained is not None and networks_config(trained) == want \
                 and saved["train"] == list(train_idx) and saved["test"] == list(test_idx) \
                 and len(saved["nets"]) >= MODELS[name].ensemble:

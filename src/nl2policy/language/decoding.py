@@ -120,13 +120,12 @@ def search(model: TrainedTranslator, batch: Batch, texts: list[str], found: Opti
                 logp = logp + findings_cost * root_prior.repeat_interleave(K, 0)
         logp[done] = torch.where(mask[done], 0.0, -math.inf)
         total = (score.view(B * K, 1) + logp).view(B, K * len(names))
+        ranked = total
         if length_norm:  # rank by log-probability per node: a finished small tree against a growing larger one
             nodes = torch.tensor([len(q) + (s is not None) for q, s in zip(prefixes, slots)], dtype=torch.float)
             ranked = (total.view(B * K, -1) / nodes.clamp(min=1)[:, None] ** length_norm).view(B, -1)
-            flat = ranked.topk(K, -1).indices  # ties keep the lower index: greedy's argmax when K = 1
-            best = total.gather(1, flat)
-        else:
-            best, flat = total.topk(K, -1)  # ties keep the lower index: greedy's argmax when K = 1
+        flat = ranked.topk(K, -1).indices  # ties keep the lower index: greedy's argmax when K = 1
+        best = total.gather(1, flat)
         source = (torch.arange(B)[:, None] * K + flat // len(names)).view(-1)
         choice = (flat % len(names)).view(-1)
         score = best
