@@ -9,6 +9,8 @@ with the tree first shown leave it as it is (a confirmed tree is no reason to re
 otherwise the tree is decoded anew with every answer a constraint of decoding itself
 (`allow_for`): no tree that acts otherwise in an answered situation is ever built, so every tree
 returned after an answer acts as answered, and trees outside the first beam can come back.
+After each answer the tree's confidence is its probability given the answers (`posterior`), and
+the translator asks again only while that is still below the threshold it first asked under.
 
 A situation names an answer to every question of the domain's dictionary, and only
 combinations the domain allows (one taxi location; no free lane beyond the edge of the road):
@@ -176,10 +178,27 @@ def weights(hypotheses: Sequence[Hypothesis]) -> list[float]:
     return [r / total for r in raw]
 
 
-def weight_of(tree: Tree, hypotheses: Sequence[Hypothesis]) -> Optional[float]:
-    """`tree`'s share of the beam's weight, or None where the beam does not hold it."""
-    shares = [w for h, w in zip(hypotheses, weights(hypotheses)) if h[0] == tree]
-    return sum(shares) if shares else None
+def probability(hypothesis: Hypothesis) -> float:
+    """The model's probability of a hypothesis's tree: the product of its nodes' probabilities
+    (under the grammar alone, also where answers held decoding: decoding.search)."""
+    return math.prod(hypothesis[1].values())
+
+
+def posterior(tree: Tree, p_tree: float, held: Sequence[Hypothesis], wide: Sequence[Hypothesis],
+              answers: Sequence[Answer]) -> float:
+    """How likely `tree` (of model probability `p_tree`) is the one meant, once `answers` hold:
+    Bayes' rule, its probability over that of every tree that acts as answered. That sum is what
+    the two beams hold of it (`held`: decoded under the answers; `wide`: decoded without them),
+    plus the probability neither beam reached, counted at the rate at which the wide beam's trees
+    act as answered. Without answers it is `p_tree` itself, the calibrated confidence; a
+    confirming answer raises it as much as it rules alternatives out."""
+    prob = {h[0]: probability(h) for h in [*wide, *held] if h[0] is not None}
+    seen = [prob[h[0]] for h in wide if h[0] is not None]
+    agree = [prob[h[0]] for h in wide if h[0] is not None and agrees(h[0], answers)]
+    rate = sum(agree) / sum(seen) if sum(seen) > 0 else 1.0
+    fitting = sum(p for t, p in prob.items() if agrees(t, answers))
+    unseen = max(0.0, 1.0 - sum(prob.values()))
+    return min(1.0, prob.get(tree, p_tree) / max(fitting + unseen * rate, 1e-12))
 
 
 def best_question(domain: str, hypotheses: Sequence[Hypothesis], answered: Sequence[Answer]) -> Optional[Situation]:

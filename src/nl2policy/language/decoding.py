@@ -49,7 +49,9 @@ def search(model: TrainedTranslator, batch: Batch, texts: list[str], found: Opti
     the tree takes shape, so the beam explores the trees the text was read to describe.
 
     `allow` (one per text, or None) restricts each text's hypotheses further as they grow, so a
-    tree that breaks it is never built; `width` overrides the beam. Returns each text's finished
+    tree that breaks it is never built, while every node keeps the probability the model gives it
+    under the grammar alone (a tree's probability stays comparable with and without `allow`);
+    `width` overrides the beam. Returns each text's finished
     hypotheses, best first; where none is left, one (None, {}, -inf)."""
     vocab = get_domain(model.domain).vocab
     names = model.tree_tokens
@@ -93,7 +95,8 @@ def search(model: TrainedTranslator, batch: Batch, texts: list[str], found: Opti
             if s not in allowed:
                 allowed[s] = torch.zeros(len(names), dtype=torch.bool)
                 allowed[s][[index[a] for a in allowed_tokens(s, vocab)]] = True
-        mask = torch.stack([allowed[s] for s in slots])  # a finished hypothesis continues at no cost
+        grammar = torch.stack([allowed[s] for s in slots])  # a finished hypothesis continues at no cost
+        mask = grammar.clone()
         if allow is not None:
             for r, (prefix, s) in enumerate(zip(prefixes, slots)):
                 rule = allow[r // K]
@@ -107,7 +110,11 @@ def search(model: TrainedTranslator, batch: Batch, texts: list[str], found: Opti
         parent = torch.tensor([-1 if s is None else s.parent for s in slots])
         branch = torch.tensor([0 if s is None else s.branch for s in slots])
         logits = state.step(parent, branch)  # (members, B*K, tokens)
-        p = torch.softmax(logits.masked_fill(~mask, -1e9), -1).mean(0)
+        # the model's own probabilities under the grammar: `allow` decides which trees are built, not
+        # what the model thinks of them. Renormalized over what `allow` leaves, a slot an answer
+        # narrows to one token would cost nothing, and the trees that pass through such slots would
+        # outrank the ones the model reads in the text (results/clarify/README.md)
+        p = torch.softmax(logits.masked_fill(~grammar, -1e9), -1).mean(0)
         done = torch.tensor([s is None for s in slots])
         if found is not None:  # hypotheses that have just finished pay for the labels they never used
             fresh = done & ~charged

@@ -23,8 +23,9 @@ import torch
 
 from nl2policy.domains import get_domain
 from nl2policy.language.clarify import (ASK_BELOW, CANDIDATES, MAX_QUESTIONS, Answer, BadAnswer, NoTreeFits, Question,
-                                        agrees, allow_for, best_question, parse_answers, question_for,
-                                        weight_of)
+                                        agrees, allow_for, best_question, parse_answers, posterior,
+                                        question_for)
+from nl2policy.language.decoding import Hypothesis
 from nl2policy.language.findings import Findings, FindingsModel, root_label
 from nl2policy.language.models.config import DEFAULT_MODEL, ModelConfig
 from nl2policy.language.models.pretrained import MiniLMCache
@@ -189,13 +190,15 @@ def translate_with(loaded: LoadedModel, domain: str, text: str, answers: Sequenc
     found = loaded.translator.read_findings([text])  # read once: decoding weighs it, the warnings quote it
     factor, warnings = check_topic(domain, text, loaded.lexicon) if loaded.lexicon else (1.0, [])
     plain = loaded.translator.predict([text], found=found)[0]  # the same for every step of the replay
+    wide = _Wide(loaded.translator, text, found[0] if found else None)
     if check_asked:
         for i, answer in enumerate(answers):
-            asked = _step(loaded, domain, text, found, plain, answers[:i], factor, max_questions)[3]
+            asked = _step(loaded, domain, text, found, plain, wide, answers[:i], factor, max_questions)[3]
             if asked is None or asked.situation != answer.situation:
                 raise BadAnswer(f"answer {i + 1} is about a situation that was not asked "
                                 + ("(nothing was asked there)" if asked is None else f"(the question was: {asked.text})"))
-    tree, node_probs, confidence, question = _step(loaded, domain, text, found, plain, answers, factor, max_questions)
+    tree, node_probs, confidence, question = _step(loaded, domain, text, found, plain, wide, answers, factor,
+                                                   max_questions)
     if confidence < LOW_CONFIDENCE:
         warnings.append(f"low confidence ({confidence:.2f}): check the tree before using it")
     if found is not None and factor == 1.0:  # off-topic text: its findings mean nothing
@@ -204,19 +207,34 @@ def translate_with(loaded: LoadedModel, domain: str, text: str, answers: Sequenc
                        [question] if question else [])
 
 
+class _Wide:
+    """The wide beam without answers, decoded at most once per translation (each step of a replay
+    may need it)."""
+
+    def __init__(self, model: TrainedTranslator, text: str, own: Optional[Findings]) -> None:
+        self.model, self.text, self.own = model, text, own
+        self.beam: Optional[list[Hypothesis]] = None
+
+    def __call__(self) -> list[Hypothesis]:
+        if self.beam is None:
+            self.beam = self.model.hypotheses(self.text, self.own, None, width=CANDIDATES)
+        return self.beam
+
+
 def _step(loaded: LoadedModel, domain: str, text: str, found: Optional[list[Findings]],
-          plain: tuple[Tree, dict[int, float]], answers: Sequence[Answer], factor: float,
+          plain: tuple[Tree, dict[int, float]], wide: _Wide, answers: Sequence[Answer], factor: float,
           max_questions: int) -> tuple[Tree, dict[int, float], float, Optional[Question]]:
     """The tree, its node probabilities, its confidence and the next question, given answers.
     Without answers this is the plain translation (`plain`: the model's beam; confidence = the
-    tree's probability). With answers, the plain translation stands while it acts as every answer says
-    (an answer that confirms the tree is no reason to redraw it); otherwise the tree is the best of
-    a wide beam held to the answers. Its confidence is then its share of that beam's weight: how
-    sure the model is of it once the answers hold."""
+    tree's probability). With answers, the plain translation stands while it acts as every answer
+    says (an answer that confirms the tree is no reason to redraw it); otherwise the tree is the
+    best of a wide beam held to the answers. Its confidence is then its probability given the
+    answers (clarify.posterior), so one threshold decides, before and after answers, whether to ask."""
     model, own = loaded.translator, found[0] if found else None
     first, first_probs = plain
-    tree, node_probs, candidates = first, first_probs, None
+    tree, node_probs = first, first_probs
     confidence = tree_probability(first_probs) * factor
+    candidates = None
     if answers:
         candidates = model.hypotheses(text, own, allow_for(domain, answers), width=CANDIDATES)
         if candidates[0][0] is None:
@@ -224,17 +242,10 @@ def _step(loaded: LoadedModel, domain: str, text: str, found: Optional[list[Find
                              "check the answers, or edit the tree by hand")
         if not agrees(first, answers):
             tree, node_probs, _ = candidates[0]
-        held = weight_of(tree, candidates)
-        if held is not None:  # else the plain translation fell off the wide beam: its own probability stays
-            confidence = held * factor
+        confidence = posterior(tree, tree_probability(node_probs), candidates, wide(), answers) * factor
     question = None
-    # the first question only where the (calibrated) confidence is low; once the user is being
-    # asked, until the plausible trees agree in every situation or the questions are spent: the
-    # share of a truncated beam is no calibrated probability (a wrong tree held 0.6-0.9 of it)
-    unsure = bool(answers) or confidence < ASK_BELOW
-    if unsure and len(answers) < max_questions and factor == 1.0:
-        candidates = candidates or model.hypotheses(text, own, None, width=CANDIDATES)
-        situation = best_question(domain, candidates, answers)
+    if confidence < ASK_BELOW and len(answers) < max_questions and factor == 1.0:
+        situation = best_question(domain, candidates or wide(), answers)
         question = question_for(domain, situation) if situation is not None else None
     return tree, node_probs, max(0.0, min(1.0, confidence)), question
 
