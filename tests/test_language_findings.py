@@ -87,3 +87,13 @@ def test_a_batch_reads_and_decodes_each_text_as_it_reads_alone():
         alone = model.read_findings([text])[0]
         assert all(abs(alone.asks[q] - found.asks[q]) < 1e-4 for q in alone.asks)
     assert [t for t, _ in model.predict(texts)] == [model.predict([t])[0][0] for t in texts]
+
+
+def test_the_findings_train_for_the_warnings_where_decoding_gives_them_no_weight(one_torch_thread):
+    """A recipe with `findings = true` and no findings cost (v6) trains them beside the networks,
+    for translate's warnings; without either it trains none."""
+    specs = load_corpus("taxi")
+    pairs = [(s.description, s.tree) for s in specs[:24]]
+    warned = dataclasses.replace(MODELS["smoke"], findings=True, findings_cost=0.0)
+    assert fit("taxi", "one", warned, pairs, seed=0).findings is not None
+    assert fit("taxi", "one", MODELS["smoke"], pairs, seed=0).findings is None

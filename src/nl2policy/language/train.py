@@ -105,11 +105,12 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
             progress(sum(done) + of * (cfg.ensemble - len(todo)), of * cfg.ensemble)
 
     findings_seed = seed + cfg.seed_offset
+    wants_findings = cfg.findings or bool(cfg.findings_cost)  # weighed in decoding, or read by the warnings alone
     if workers > 1 and len(todo) > 1:
         if vocab_texts is not None:  # encode the shared real descriptions once, before the fork
             for text in vocab_texts:
                 model.encode(text)
-        side = (lambda: train_findings(domain, draw(0), findings_seed, model.cache).state()) if cfg.findings_cost else None
+        side = (lambda: train_findings(domain, draw(0), findings_seed, model.cache).state()) if wants_findings else None
         findings_state = train_forked(todo, train_member, workers, report, ckpt, side_job=side)
         if findings_state is not None:  # the same findings as trained below, one thread either way
             model.findings = FindingsModel.from_state(findings_state, model.cache)
@@ -122,7 +123,7 @@ def fit(domain: str, name: str, cfg: ModelConfig, pairs: Pairs, seed: int = 0,
         net.load_state_dict(ckpt.finished[member])
         model.nets.append(net.eval())
         model.history += ckpt.history[member]
-    if cfg.findings_cost and model.findings is None:  # the learned findings the decoder weighs (findings.py), on the first member's pairs
+    if wants_findings and model.findings is None:  # the learned findings (findings.py), on the first member's pairs
         model.findings = train_findings(domain, draw(0), findings_seed, model.cache)
     return model
 

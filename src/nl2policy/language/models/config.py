@@ -28,6 +28,7 @@ class ModelConfig:
     seed_offset: int = 0  # added to every member's seed and draw: another training run of the same recipe
     findings_cost: float = 0.0  # decoding: weight of the learned findings' log-agreement (language/findings.py)
     length_norm: float = 0.0  # decoding: the beam ranks trees by log-probability / nodes ** length_norm (0 = the sum)
+    findings: bool = False  # train the learned findings even where decoding gives them no weight: translate's warnings read them
 
     def __post_init__(self) -> None:
         if isinstance(self.synthetic, list):  # a recipe file's list: a tuple keeps the config hashable
@@ -52,8 +53,9 @@ class ModelConfig:
         return asdict(self)
 
 
-DECODING_FIELDS = ("ensemble", "beam", "findings_cost", "length_norm")
-"""The settings that change only how trained networks are decoded (`ensemble`: how many of them)."""
+DECODING_FIELDS = ("ensemble", "beam", "findings_cost", "length_norm", "findings")
+"""The settings that leave the trained networks as they are: how they are decoded (`ensemble`: how
+many of them), and whether the learned findings train beside them."""
 
 
 def networks_config(cfg: ModelConfig) -> ModelConfig:
