@@ -216,11 +216,12 @@ def test_decoding_under_answers_keeps_the_models_own_probabilities():
     first = wide[0][0]
     other = next(h for h in wide[1:] if any(h[0].act(dict(s)) != first.act(dict(s)) for s in situations("taxi")))
     where = next(s for s in situations("taxi") if other[0].act(dict(s)) != first.act(dict(s)))
-    from nl2policy.language.clarify import allow_for, probability
+    from nl2policy.language.clarify import allow_for
+    from nl2policy.language.decoding import tree_probability
     held = model.hypotheses(text, None, allow_for("taxi", [Answer(where, other[0].act(dict(where)))]), width=16)
     same = next(h for h in held if h[0] == other[0])
-    assert probability(same) == pytest.approx(probability(other), rel=1e-5)
-    assert all(probability(h) <= probability(wide[0]) + 1e-9 for h in held)  # none made likelier than the best
+    assert tree_probability(same[1]) == pytest.approx(tree_probability(other[1]), rel=1e-5)
+    assert all(tree_probability(h[1]) <= tree_probability(wide[0][1]) + 1e-9 for h in held)  # none made likelier than the best
 
 
 @pytest.mark.parametrize("domain", ["taxi", "highway"])

@@ -26,7 +26,7 @@ from typing import Any, Mapping, Optional, Sequence
 
 from nl2policy.domains import get_domain
 from nl2policy.errors import UserError
-from nl2policy.language.decoding import Allow, Hypothesis
+from nl2policy.language.decoding import Allow, Hypothesis, tree_probability
 from nl2policy.language.grammar import Slot
 from nl2policy.trees import Tree
 
@@ -178,12 +178,6 @@ def weights(hypotheses: Sequence[Hypothesis]) -> list[float]:
     return [r / total for r in raw]
 
 
-def probability(hypothesis: Hypothesis) -> float:
-    """The model's probability of a hypothesis's tree: the product of its nodes' probabilities
-    (under the grammar alone, also where answers held decoding: decoding.search)."""
-    return math.prod(hypothesis[1].values())
-
-
 def posterior(tree: Tree, p_tree: float, held: Sequence[Hypothesis], wide: Sequence[Hypothesis],
               answers: Sequence[Answer]) -> float:
     """How likely `tree` (of model probability `p_tree`) is the one meant, once `answers` hold:
@@ -192,13 +186,13 @@ def posterior(tree: Tree, p_tree: float, held: Sequence[Hypothesis], wide: Seque
     plus the probability neither beam reached, counted at the rate at which the wide beam's trees
     act as answered. Without answers it is `p_tree` itself, the calibrated confidence; a
     confirming answer raises it as much as it rules alternatives out."""
-    prob = {h[0]: probability(h) for h in [*wide, *held] if h[0] is not None}
-    seen = [prob[h[0]] for h in wide if h[0] is not None]
-    agree = [prob[h[0]] for h in wide if h[0] is not None and agrees(h[0], answers)]
-    rate = sum(agree) / sum(seen) if sum(seen) > 0 else 1.0
-    fitting = sum(p for t, p in prob.items() if agrees(t, answers))
+    prob = {h[0]: tree_probability(h[1]) for h in [*wide, *held] if h[0] is not None}
+    fits = {t for t in prob if agrees(t, answers)}
+    seen = {h[0] for h in wide if h[0] is not None}
+    in_wide = sum(prob[t] for t in seen)
+    rate = sum(prob[t] for t in seen & fits) / in_wide if in_wide > 0 else 1.0
     unseen = max(0.0, 1.0 - sum(prob.values()))
-    return min(1.0, prob.get(tree, p_tree) / max(fitting + unseen * rate, 1e-12))
+    return min(1.0, prob.get(tree, p_tree) / max(sum(prob[t] for t in fits) + unseen * rate, 1e-12))
 
 
 def best_question(domain: str, hypotheses: Sequence[Hypothesis], answered: Sequence[Answer]) -> Optional[Situation]:

@@ -32,6 +32,13 @@ Hypothesis = tuple[Optional[Tree], dict[int, float], float]
 """A finished hypothesis: its tree (None if no tree fits), each node's probability, its score."""
 
 
+def tree_probability(node_probs: dict[int, float]) -> float:
+    """The decoder's probability of the whole tree (the product over its nodes, under the grammar
+    alone, also where `allow` held the search): the confidence of an on-topic translation, before
+    the topic check scales it, and what clarify's Bayes' rule weighs each tree by."""
+    return math.prod(node_probs.values())
+
+
 def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str],
                 found: Optional[Sequence[Findings]] = None) -> list[tuple[Tree, dict[int, float]]]:
     """The best tree of each text (see `search`)."""

@@ -12,7 +12,6 @@ text seems to ask first.
 
 from __future__ import annotations
 
-import math
 import sys
 import threading
 from dataclasses import dataclass, field, fields
@@ -25,7 +24,7 @@ from nl2policy.domains import get_domain
 from nl2policy.language.clarify import (ASK_BELOW, CANDIDATES, MAX_QUESTIONS, Answer, BadAnswer, NoTreeFits, Question,
                                         agrees, allow_for, best_question, parse_answers, posterior,
                                         question_for)
-from nl2policy.language.decoding import Hypothesis
+from nl2policy.language.decoding import Hypothesis, tree_probability
 from nl2policy.language.findings import Findings, FindingsModel, root_label
 from nl2policy.language.models.config import DEFAULT_MODEL, ModelConfig
 from nl2policy.language.models.pretrained import MiniLMCache
@@ -154,12 +153,6 @@ def check_topic(domain: str, text: str, lexicon: dict[str, set[str]]) -> tuple[f
     if other_hits > own:
         return 0.1, [f"this reads like a description for the {other} domain, not {domain}"]
     return 1.0, []
-
-
-def tree_probability(node_probs: dict[int, float]) -> float:
-    """The decoder's probability of the whole tree (the product over its nodes): the confidence
-    of an on-topic translation, before the topic check scales it."""
-    return math.prod(node_probs.values())
 
 
 def _asks(domain: str, question: str) -> str:
