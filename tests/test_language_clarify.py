@@ -243,3 +243,24 @@ def test_the_translator_asks_again_only_while_the_answers_leave_it_unsure(domain
             elif len(answers) < 3 and result.confidence >= ASK_BELOW:
                 stopped_sure += 1
     assert stopped_sure >= 1
+
+
+def test_the_cross_fitted_threshold_never_reads_the_held_out_writers_rows(tmp_path):
+    """experiments/clarify_threshold: each writer's threshold is the lowest confidence at which the
+    other writers' translations are still the target precision right, so a writer's own errors
+    never move it; the report scores each writer with the threshold the others gave."""
+    from experiments.clarify_threshold import lowest_threshold, main
+
+    rows = [("taxi", "a", 0.9, True), ("taxi", "a", 0.5, True), ("taxi", "a", 0.4, False),
+            ("taxi", "b", 0.8, True), ("taxi", "b", 0.45, True), ("taxi", "b", 0.3, False)]
+    assert lowest_threshold(rows, 1.0) == 0.45
+    assert lowest_threshold(rows, 0.8) == 0.4  # 4 of the 5 at or above 0.4; at 0.3, 4 of 6
+    assert lowest_threshold([("taxi", "a", 0.9, False)], 0.97) is None
+    path = tmp_path / "rows.jsonl"
+    path.write_text("".join(json.dumps({"fold": f"{d}-v6-new-f0", "id": f"{w}-{i:03d}", "confidence": [p], "exact": [e]}) + "\n"
+                            for i, (d, w, p, e) in enumerate(rows)))
+    main(["--rows", str(path), "--precision", "1.0", "--out", str(tmp_path / "t.md")])
+    report = (tmp_path / "t.md").read_text()
+    # a's threshold comes from b alone (0.45), b's from a alone (0.5): a keeps 2 rows (both right), b keeps 1
+    assert "| a | 0.450 |" in report and "| b | 0.500 |" in report
+    assert "| taxi | 6 | 50.0 | 100.0 |" in report
