@@ -59,3 +59,28 @@ def test_installed_entry_point_runs():
     bad = subprocess.run([sys.executable, "-m", "nl2policy.cli", "evaluate", "--domain", "taxi", "--tree", "{"],
                          capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "malformed JSON" in bad.stderr
+
+
+def test_run_says_what_an_unsure_translator_asks_and_where_to_answer(tmp_path, monkeypatch):
+    """The main job optimizes the tree it was given; when the translator is unsure it shows the
+    question it would ask and the two places to answer it, before PPO starts."""
+    import nl2policy.language.translate as translate_module
+    import nl2policy.policy.optimize as optimize_module
+    from nl2policy.language.clarify import question_for
+    from nl2policy.domains import get_domain
+    from nl2policy.language.clarify import situations
+    from nl2policy.trees import parse_tree
+
+    vocab = get_domain("taxi").vocab
+    question = question_for("taxi", situations("taxi")[0])
+    unsure = translate_module.Translation(parse_tree({"do": "wait"}, vocab), 0.2, [], {}, [question])
+    monkeypatch.setattr(translate_module, "translate", lambda domain, text: unsure)
+
+    def refuse(*args, **kwargs):
+        raise optimize_module.OptimizeRefused("stopped here by the test")
+    monkeypatch.setattr(optimize_module, "optimize_tree", refuse)
+    result = runner.invoke(app, ["run", "--domain", "taxi", "wait at the rank", "--out", str(tmp_path)])
+    assert result.exit_code == 2
+    said = " ".join(result.output.split())
+    assert f"the translator asks: {' '.join(question.text.split())}" in said
+    assert "--interactive" in said and "Specify page" in said

@@ -41,6 +41,10 @@ def run_pipeline(console: Console, err: Console, domain: str, text: str, steps: 
     show_tree(console, f"translated tree · confidence {translation.confidence:.0%}", json.loads(json.dumps(translation.to_json()["tree"])), domain)
     for warning in translation.warnings:
         err.print(f"[yellow]warning:[/] {warning}")
+    if translation.questions:  # unsure: what it would ask, and where to answer (PPO starts from this tree meanwhile)
+        err.print(f"[yellow]unsure:[/] the translator asks: {translation.questions[0].text}\n"
+                  f"  Answer its questions with `nl2policy translate --domain {domain} --interactive \"...\"` or on the "
+                  "Specify page, then optimize the tree you get.", highlight=False)
     with progress_bar() as bar:
         task = bar.add_task(f"{domain}: PPO from the tree", total=trained_steps(domain, steps))
         try:
