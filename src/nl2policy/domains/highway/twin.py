@@ -16,10 +16,10 @@ not copied, so a changed constant there changes the twin too):
   ``spacing * (12 + speed) * exp(-5/40 * lanes) * U(0.9, 1.1)`` metres ahead of the car
   before it; each other car draws its IDM exponent from ``IDMVehicle.DELTA_RANGE`` and starts
   its lane-change timer at ``(x + y) * pi mod LANE_CHANGE_DELAY``;
-* the other cars' behaviour (``IDMVehicle.act``): IDM acceleration on the car ahead in their
-  lane (and in the target lane while changing), clipped to ``ACC_MAX``; MOBIL lane changes
-  (politeness 0) every ``LANE_CHANGE_DELAY``; aborting a lane change when another car merging
-  into the same lane is within the desired gap ahead; the cascaded lateral controller;
+* the other cars' behaviour (``IDMVehicle.act``; ``traffic.py``): IDM acceleration on the car
+  ahead in their lane (and in the target lane while changing), clipped to ``ACC_MAX``; MOBIL
+  lane changes (politeness 0) every ``LANE_CHANGE_DELAY``; aborting a lane change when another
+  car merging into the same lane is within the desired gap ahead; the cascaded lateral controller;
 * the ego car (``MDPVehicle``): meta-actions LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER over
   the target speeds (20, 25, 30) m/s, applied once a decision, then the speed and steering
   controllers every frame;
@@ -35,7 +35,7 @@ not copied, so a changed constant there changes the twin too):
   Kinematics observation with ``vehicles_count=5`` would show them.
 
 Neighbour searches sort the cars by position once a frame and scan each lane's order
-(``_lane_neighbours``); the collision test is ego against each other car, O(vehicles).
+(``traffic.lane_neighbours``); the collision test is ego against each other car, O(vehicles).
 
 Known differences, each with its reason:
 
@@ -70,6 +70,7 @@ from .env import BASE_CONFIG, RANGE, SPEED_SCALE
 from .geometry import (
     DIAGONAL, EGO_SPEED, IDM, KP_A, KP_HEADING, KP_LATERAL, LANE_WIDTH, LENGTH, MAX_SPEED, MAX_STEERING, MIN_SPEED,
     ROAD_LENGTH, TARGET_SPEEDS, RoadOrder, not_zero, separating_axes, wrap_to_pi)
+from .traffic import Cars, idm, lane_changes, lane_neighbours
 
 # highway-env's DiscreteMetaAction labels by index.
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
@@ -121,32 +122,6 @@ class TwinConfig:
             reward_speed_range=tuple(map(float, cfg["reward_speed_range"])),
             perception=float(HighwayEnvFast.PERCEPTION_DISTANCE),
         )
-
-
-class _Cars:
-    """What IDM reads of a car, for every car plus a "no car" column (index v), gathered by
-    index arrays with one flat take: built once a frame, not once a query."""
-
-    FIELDS = ("x", "vx", "vy", "speed", "target", "cos", "sin")  # what a front car needs comes first
-    FRONT = 3
-
-    def __init__(self, twin: "HighwayTwin") -> None:
-        n, v = twin.x.shape
-        self.v = v
-        self.base = np.arange(n)[:, None] * (v + 1)
-        cos, sin = np.cos(twin.heading), np.sin(twin.heading)
-        target = np.abs(not_zero(np.clip(twin.target_speed, 0, twin.config.speed_limit)))
-        table = np.zeros((len(self.FIELDS), n, v + 1))
-        for k, values in enumerate((twin.x, twin.speed * cos, twin.speed * sin, twin.speed, target, cos, sin)):
-            table[k, :, :v] = values
-        table[4, :, v] = 1.0  # "no car" has a harmless target speed; its results are masked out
-        self.flat = table.reshape(len(self.FIELDS), -1)
-        self.own = table[:, :, :v]  # each car itself, without a copy
-        self.free_own = IDM.COMFORT_ACC_MAX * (1 - np.power(np.maximum(twin.speed, 0) / target, twin.delta))
-
-    def take(self, index: np.ndarray, fields: int = len(FIELDS)) -> np.ndarray:
-        """(fields, n, v): the first `fields` fields of car index[n, i]."""
-        return self.flat[:fields, self.base + index]
 
 
 class HighwayTwin:
@@ -258,85 +233,6 @@ class HighwayTwin:
         self.crashed[idx] = False
         self.time[idx] = 0
 
-    # ----- neighbours, IDM and MOBIL ----------------------------------------------------------
-    def _lane_neighbours(self, order: "RoadOrder") -> tuple[np.ndarray, np.ndarray]:
-        """front[l, n, i] / rear[l, n, i]: the nearest car ahead of / behind car i among the cars
-        on lane l (within half a lane plus 1 m of its centre: Lane.on_lane with margin 1), as
-        ``Road.neighbour_vehicles(i, lane l)`` finds them; ``self.v`` where there is none."""
-        lanes = self.config.lanes
-        front = np.empty((lanes, self.num_envs, self.v), dtype=np.int64)
-        rear = np.empty_like(front)
-        for lane in range(lanes):
-            on = np.abs(self.y - lane * LANE_WIDTH) <= LANE_WIDTH / 2 + 1
-            front[lane], rear[lane] = order.ahead(on), order.behind(on)
-        return front, rear
-
-    @staticmethod
-    def _desired_gap(e: np.ndarray, f: np.ndarray) -> np.ndarray:
-        """IDMVehicle.desired_gap for gathered cars e (ego) and f (front), velocities projected
-        on the ego's heading."""
-        _, vx, vy, speed, _, cos, sin = e
-        dv = (vx - f[1]) * cos + (vy - f[2]) * sin
-        ab = -IDM.COMFORT_ACC_MAX * IDM.COMFORT_ACC_MIN
-        return IDM.DISTANCE_WANTED + speed * IDM.TIME_WANTED + speed * dv / (2 * np.sqrt(ab))
-
-    def _idm(self, cars: _Cars, ego: Optional[np.ndarray], front: np.ndarray,
-             delta: np.ndarray) -> np.ndarray:
-        """IDMVehicle.acceleration(ego_vehicle=ego, front_vehicle=front), with the deciding car's
-        exponent `delta`; 0 where there is no ego car (index ``self.v``). ``ego=None`` means each
-        car itself, deciding for itself (its free-road term is computed once a frame)."""
-        f = cars.take(front, _Cars.FRONT)
-        if ego is None:
-            e, accel = cars.own, cars.free_own
-        else:
-            e = cars.take(ego)
-            accel = IDM.COMFORT_ACC_MAX * (1 - np.power(np.maximum(e[3], 0) / e[4], delta))
-        interaction = IDM.COMFORT_ACC_MAX * np.power(self._desired_gap(e, f) / not_zero(f[0] - e[0]), 2)
-        accel = np.where(front < self.v, accel - interaction, accel)
-        return accel if ego is None else np.where(ego < self.v, accel, 0.0)
-
-    def _lane_changes(self, cars: _Cars, order: RoadOrder, follow: np.ndarray, rear: np.ndarray) -> None:
-        """IDMVehicle.change_lane_policy for every other car at once: abort a change that
-        another merging car makes unsafe, else every LANE_CHANGE_DELAY ask MOBIL about the lane
-        to the left, then to the right (a yes to the right wins)."""
-        n, v, lanes = self.num_envs, self.v, self.config.lanes
-        idm = (np.arange(v)[None, :] > 0) & ~self.crashed
-        changing = idm & (self.lane != self.target_lane)
-
-        # Abort: a car already heading for my target lane from another lane, close ahead.
-        merging = (self.lane != self.target_lane)  # any car, the ego included
-        merging_ahead = np.full((n, v), v, dtype=np.int64)
-        for lane in range(lanes):
-            merging_ahead = np.where(self.target_lane == lane, order.ahead(merging & (self.target_lane == lane)),
-                                     merging_ahead)
-        me = np.broadcast_to(np.arange(v), (n, v))
-        e, f = cars.own, cars.take(merging_ahead, _Cars.FRONT)
-        distance = f[0] - e[0]
-        abort = changing & (merging_ahead < v) & (distance > 0) & (distance < self._desired_gap(e, f))
-        self.target_lane = np.where(abort, self.lane, self.target_lane)
-
-        # MOBIL, at its own pace.
-        due = idm & ~changing & (self.timer > IDM.LANE_CHANGE_DELAY)
-        self.timer = np.where(due, 0.0, self.timer)
-        ask = due & (np.abs(self.speed) >= 1)
-        if not ask.any():
-            return
-        rows = np.arange(n)[:, None]
-        self_a = follow[self.lane, rows, me]
-        new_target = self.target_lane.copy()
-        for step in (-1, 1):
-            candidate = self.lane + step
-            valid = ask & (candidate >= 0) & (candidate < lanes)
-            lane = np.clip(candidate, 0, lanes - 1)
-            new_rear = rear[lane, rows, me]
-            # Would my new follower have to brake too hard?
-            follower_a = self._idm(cars, new_rear, me, self.delta)
-            safe = follower_a >= -IDM.LANE_CHANGE_MAX_BRAKING_IMPOSED
-            # Do I gain enough (politeness 0: only my own acceleration counts)?
-            gain = follow[lane, rows, me] - self_a
-            new_target = np.where(valid & safe & (gain >= IDM.LANE_CHANGE_MIN_ACC_GAIN), lane, new_target)
-        self.target_lane = new_target
-
     # ----- control and kinematics -------------------------------------------------------------
     def _steering(self) -> np.ndarray:
         """ControlledVehicle.steering_control towards each car's target lane (straight lanes)."""
@@ -367,12 +263,12 @@ class HighwayTwin:
     def _frame(self, active: np.ndarray) -> None:
         """One simulation frame (Road.act, Road.step) for the episodes in `active`."""
         dt = self.config.dt
-        order, cars = RoadOrder(self.x), _Cars(self)
-        front, rear = self._lane_neighbours(order)
+        order, cars = RoadOrder(self.x), Cars(self)
+        front, rear = lane_neighbours(self, order)
         # follow[l]: each car's IDM acceleration behind the car ahead of it on lane l
-        follow = np.stack([self._idm(cars, None, front[lane], self.delta) for lane in range(self.config.lanes)])
+        follow = np.stack([idm(self, cars, None, front[lane], self.delta) for lane in range(self.config.lanes)])
         saved = (self.target_lane.copy(), self.timer.copy())
-        self._lane_changes(cars, order, follow, rear)
+        lane_changes(self, cars, order, follow, rear)
         # Frozen (finished) episodes keep their state.
         self.target_lane = np.where(active[:, None], self.target_lane, saved[0])
         self.timer = np.where(active[:, None], self.timer, saved[1])
