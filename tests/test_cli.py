@@ -66,9 +66,8 @@ def test_run_says_what_an_unsure_translator_asks_and_where_to_answer(tmp_path, m
     question it would ask and the two places to answer it, before PPO starts."""
     import nl2policy.language.translate as translate_module
     import nl2policy.policy.optimize as optimize_module
-    from nl2policy.language.clarify import question_for
     from nl2policy.domains import get_domain
-    from nl2policy.language.clarify import situations
+    from nl2policy.language.clarify import question_for, situations
     from nl2policy.trees import parse_tree
 
     vocab = get_domain("taxi").vocab

@@ -66,10 +66,9 @@ def desired_gap(e: np.ndarray, f: np.ndarray) -> np.ndarray:
     return IDM.DISTANCE_WANTED + speed * IDM.TIME_WANTED + speed * dv / (2 * np.sqrt(ab))
 
 
-def idm(twin: HighwayTwin, cars: Cars, ego: Optional[np.ndarray], front: np.ndarray,
-         delta: np.ndarray) -> np.ndarray:
+def idm(cars: Cars, ego: Optional[np.ndarray], front: np.ndarray, delta: np.ndarray) -> np.ndarray:
     """IDMVehicle.acceleration(ego_vehicle=ego, front_vehicle=front), with the deciding car's
-    exponent `delta`; 0 where there is no ego car (index ``twin.v``). ``ego=None`` means each
+    exponent `delta`; 0 where there is no ego car (index ``cars.v``). ``ego=None`` means each
     car itself, deciding for itself (its free-road term is computed once a frame)."""
     f = cars.take(front, Cars.FRONT)
     if ego is None:
@@ -78,8 +77,8 @@ def idm(twin: HighwayTwin, cars: Cars, ego: Optional[np.ndarray], front: np.ndar
         e = cars.take(ego)
         accel = IDM.COMFORT_ACC_MAX * (1 - np.power(np.maximum(e[3], 0) / e[4], delta))
     interaction = IDM.COMFORT_ACC_MAX * np.power(desired_gap(e, f) / not_zero(f[0] - e[0]), 2)
-    accel = np.where(front < twin.v, accel - interaction, accel)
-    return accel if ego is None else np.where(ego < twin.v, accel, 0.0)
+    accel = np.where(front < cars.v, accel - interaction, accel)
+    return accel if ego is None else np.where(ego < cars.v, accel, 0.0)
 
 
 def lane_changes(twin: HighwayTwin, cars: Cars, order: RoadOrder, follow: np.ndarray, rear: np.ndarray) -> None:
@@ -117,7 +116,7 @@ def lane_changes(twin: HighwayTwin, cars: Cars, order: RoadOrder, follow: np.nda
         lane = np.clip(candidate, 0, lanes - 1)
         new_rear = rear[lane, rows, me]
         # Would my new follower have to brake too hard?
-        follower_a = idm(twin, cars, new_rear, me, twin.delta)
+        follower_a = idm(cars, new_rear, me, twin.delta)
         safe = follower_a >= -IDM.LANE_CHANGE_MAX_BRAKING_IMPOSED
         # Do I gain enough (politeness 0: only my own acceleration counts)?
         gain = follow[lane, rows, me] - self_a

@@ -266,7 +266,7 @@ class HighwayTwin:
         order, cars = RoadOrder(self.x), Cars(self)
         front, rear = lane_neighbours(self, order)
         # follow[l]: each car's IDM acceleration behind the car ahead of it on lane l
-        follow = np.stack([idm(self, cars, None, front[lane], self.delta) for lane in range(self.config.lanes)])
+        follow = np.stack([idm(cars, None, front[lane], self.delta) for lane in range(self.config.lanes)])
         saved = (self.target_lane.copy(), self.timer.copy())
         lane_changes(self, cars, order, follow, rear)
         # Frozen (finished) episodes keep their state.
