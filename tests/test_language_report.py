@@ -15,7 +15,8 @@ def _run(domain, model, fold, protocol, tree_acc, **extra):
 
 def _summary(tmp_path, runs, **kw) -> str:
     (tmp_path / "runs.jsonl").write_text("".join(json.dumps(r) + "\n" for r in runs))
-    return summarize([tmp_path / "runs.jsonl"], tmp_path / "table.md", "cmd", "budget", **kw).read_text()
+    md = summarize([tmp_path / "runs.jsonl"], tmp_path / "table.md", "cmd", "budget", **kw)
+    return md.read_text() + "\n" + (tmp_path / "table-details.md").read_text()
 
 
 def test_table_one_sets_every_protocol_of_a_model_side_by_side_per_domain(tmp_path):
@@ -56,6 +57,14 @@ def test_summary_sets_the_defaults_cv_beside_the_paper_with_leave_writers_out(tm
     part = _summary(tmp_path, runs).split("## The default against the paper")[1].split("\n## ")[0]
     assert "| taxi | CV, round 2 in training | 90.00 [15 folds] | 70.00 [1 folds] | 86.30 | yes |" in part
     assert "| highway | CV (round 1) | 80.00 [1 folds] | not run | 80.38 | no |" in part
+
+
+def test_table_one_keeps_to_exact_accuracy_and_links_the_details_file(tmp_path):
+    _summary(tmp_path, [_run("taxi", "m", "cv-r0-f0", "cv", 0.5)])
+    main, details = (tmp_path / "table.md").read_text(), (tmp_path / "table-details.md").read_text()
+    assert "## taxi: exact tree accuracy" in main and "token accuracy" not in main.split("Token accuracy")[0]
+    assert "[table-details.md](table-details.md)" in main
+    assert "## taxi: token accuracy" in details and "exact tree accuracy" not in details
 
 
 def test_reliability_table_bins_confidence_and_gives_the_accuracy_above_the_threshold(tmp_path):

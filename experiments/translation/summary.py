@@ -195,7 +195,8 @@ def against_paper(table: Sequence[dict]) -> list[str]:
 
 def summarize(runs_files: Sequence[Path], md: Path, command: str, budget: str,
               planned: Sequence[tuple[str, str, str, int]] = (), models: Optional[dict[str, str]] = None) -> Path:
-    """Table 1 and the tables below it, as Markdown at `md` (and JSON beside it), from the folds
+    """Table 1 (exact accuracy per protocol, and on new trees by their size) as Markdown at `md`, JSON
+    beside it, and the tables a closer reader wants in MD-details.md beside it, from the folds
     in `runs_files`; `planned`: (domain, model, protocol, folds) a plan asked for, to list what
     has not run yet; `models`: the recorded models to show, each under the name to show it by
     (a recipe recorded under an older name), None: all of them."""
@@ -221,21 +222,26 @@ def summarize(runs_files: Sequence[Path], md: Path, command: str, budget: str,
     invalid = [f"{r['domain']} {r['model']} {r['protocol']}" for r in table if not r["all_valid"]]
     lines += [f"Every output is a valid tree: {'yes' if not invalid else 'NO: ' + '; '.join(invalid)} "
               f"({sum(r['n'] for r in table)} translations).", ""]
-    for domain in sorted({r["domain"] for r in table}):
-        lines += [f"## {domain}: token accuracy (15-slot grid)", "", *table_one(table, domain, "token_acc"), ""]
-    effects = decoding_effects(runs)
-    if effects:
-        lines += ["## Decoding choices against the same networks decoded without them", "", *effects, ""]
     sized = by_tree_size(runs)
     if sized:
         lines += ["## New writers, new trees: exact accuracy (%) by the number of questions in the tree", "",
                   "(translations in brackets)", "", *sized, ""]
+    details_path = md.with_name(md.stem + "-details.md")
+    details = [f"# Translation accuracy (%): the details of Table 1 (`{md.name}`)", "", f"Made by: `{command}`  ",
+               f"On: {meta['made']}", ""]
+    for domain in sorted({r["domain"] for r in table}):
+        details += [f"## {domain}: token accuracy (15-slot grid)", "", *table_one(table, domain, "token_acc"), ""]
+    effects = decoding_effects(runs)
+    if effects:
+        details += ["## Decoding choices against the same networks decoded without them", "", *effects, ""]
     reliable = reliability(runs)
     if reliable:
-        lines += ["## Confidence: exact accuracy (%) and translations per bin of confidence", "",
-                  "Confidence = the product of the tree's node probabilities (what `translate` reports for an on-topic "
-                  f"text); the app flags a translation below {LOW_CONFIDENCE}, and the translator asks the user about a situation "
-                  f"below {ASK_BELOW} (language/clarify.py).", "", *reliable, ""]
+        details += ["## Confidence: exact accuracy (%) and translations per bin of confidence", "",
+                    "Confidence = the product of the tree's node probabilities (what `translate` reports for an on-topic "
+                    f"text); the app flags a translation below {LOW_CONFIDENCE}, and the translator asks the user about a situation "
+                    f"below {ASK_BELOW} (language/clarify.py).", "", *reliable, ""]
+    lines += [f"Token accuracy, each decoding choice against the same networks without it, and the confidence's "
+              f"reliability: [{details_path.name}]({details_path.name}).", ""]
     have = {(r["domain"], r["model"], r["protocol"]): r["folds"] for r in table}
     missing = [f"{d} {m} {p}: {want - have.get((d, m, p), 0)} of {want} folds to go"
                for d, m, p, want in planned if have.get((d, m, p), 0) < want]
@@ -243,6 +249,7 @@ def summarize(runs_files: Sequence[Path], md: Path, command: str, budget: str,
         lines += ["**Planned but not run yet:** " + "; ".join(missing) + ".", ""]
     md.parent.mkdir(parents=True, exist_ok=True)
     md.write_text("\n".join(lines))
+    details_path.write_text("\n".join(details))
     md.with_suffix(".json").write_text(json.dumps({"meta": meta, "budget": budget, "rows": table, "not_run": missing},
                                                   indent=2))
     return md
