@@ -175,7 +175,7 @@ def main(argv: Optional[list[str]] = None) -> None:
         for fold, loaded, items in jobs:
             rows = []
             for text, gold, key in items:
-                row = {"fold": fold, "id": key, **simulate(loaded, args.domain, text, gold, args.max_questions)}
+                row = {"fold": fold, "domain": args.domain, "id": key, **simulate(loaded, args.domain, text, gold, args.max_questions)}
                 fh.write(json.dumps(row) + "\n")
                 rows.append(row)
             by_fold[fold] = summarize(rows, args.max_questions)

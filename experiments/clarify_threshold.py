@@ -32,13 +32,13 @@ Row = tuple[str, str, float, bool]
 
 
 def read_rows(path: Path) -> list[Row]:
-    """A clarify run's rows: the domain is the folds' (`taxi-v5-new-f0` -> taxi), the writer the
-    description id's prefix (`memo-017` -> memo)."""
+    """A clarify run's rows: the domain as recorded (rows written before it was, from `--folds` runs
+    only: the fold's, `taxi-v5-new-f0` -> taxi), the writer the description id's prefix (`memo-017` -> memo)."""
     out = []
     for line in path.read_text().splitlines():
         if line.strip():
             r = json.loads(line)
-            out.append((r["fold"].split("-")[0], r["id"].rsplit("-", 1)[0], float(r["confidence"][0]), bool(r["exact"][0])))
+            out.append((r.get("domain") or r["fold"].split("-")[0], r["id"].rsplit("-", 1)[0], float(r["confidence"][0]), bool(r["exact"][0])))
     return out
 
 

@@ -264,3 +264,7 @@ def test_the_cross_fitted_threshold_never_reads_the_held_out_writers_rows(tmp_pa
     # a's threshold comes from b alone (0.45), b's from a alone (0.5): a keeps 2 rows (both right), b keeps 1
     assert "| a | 0.450 |" in report and "| b | 0.500 |" in report
     assert "| taxi | 6 | 50.0 | 100.0 |" in report
+    # a `--data` run's rows (fold "data") name their domain
+    path.write_text(json.dumps({"fold": "data", "domain": "highway", "id": "a-000", "confidence": [0.9], "exact": [True]}) + "\n")
+    main(["--rows", str(path), "--precision", "1.0", "--out", str(tmp_path / "t.md")])
+    assert "| highway | 1 |" in (tmp_path / "t.md").read_text()
