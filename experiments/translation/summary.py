@@ -214,7 +214,8 @@ def summarize(runs_files: Sequence[Path], md: Path, command: str, budget: str,
              "leave-trees-out = 5 folds of held-out policies over both rounds; new writers, new trees = each round-2 "
              "writer held out with every policy they describe. Paper's HAN2Tree (CV, 5x3): taxi 86.30, highway 80.38 "
              "(Tambwekar et al., RA-L 2023).", ""]
-    for domain in sorted({r["domain"] for r in table}):
+    domains = sorted({r["domain"] for r in table})
+    for domain in domains:
         lines += [f"## {domain}: exact tree accuracy", "", *table_one(table, domain), ""]
     paper = against_paper(table)
     if paper:
@@ -229,7 +230,7 @@ def summarize(runs_files: Sequence[Path], md: Path, command: str, budget: str,
     details_path = md.with_name(md.stem + "-details.md")
     details = [f"# Translation accuracy (%): the details of Table 1 (`{md.name}`)", "", f"Made by: `{command}`  ",
                f"On: {meta['made']}", ""]
-    for domain in sorted({r["domain"] for r in table}):
+    for domain in domains:
         details += [f"## {domain}: token accuracy (15-slot grid)", "", *table_one(table, domain, "token_acc"), ""]
     effects = decoding_effects(runs)
     if effects:
