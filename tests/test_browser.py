@@ -49,6 +49,13 @@ def server(tmp_path_factory):
     deadline = time.time() + 30
     while not srv.started and time.time() < deadline:
         time.sleep(0.1)
+    # The first translation in a process loads the translator and builds MiniLM's saved forward:
+    # seconds alone, a minute or more beside a busy test worker. Done here, in the server's
+    # process, so each page's waits time the page and not that one-off load.
+    from nl2policy.language.translate import translate
+
+    for domain in ("taxi", "highway"):
+        translate(domain, DESCRIPTION)
     yield f"http://127.0.0.1:{port}", base
     srv.should_exit = True
     thread.join(timeout=15)

@@ -91,7 +91,7 @@ def test_a_killed_ray_worker_restarts_its_run_from_the_checkpoint_and_the_grid_c
     """kill -9 the worker running a PPO run after its first checkpoint: Ray starts the task again,
     it resumes from checkpoint.zip, and the grid finishes; the same grid again skips it all."""
     out = tmp_path / "grid"
-    STEPS = 10240  # 10 checkpoints of 1,024 steps: a run lasts long enough to be killed mid-way
+    STEPS = 5120  # 5 checkpoints of 1,024 steps: a run lasts long enough to be killed mid-way
     cmd = [sys.executable, "-m", "experiments.policy", "table2", "--domain", "taxi", "--steps", str(STEPS),
            "--candidates", "2", "--best", "1", "--select-episodes", "1", "--tree-seeds", "1", "--baseline-seeds", "1",
            "--out", str(out), "--ray"]
