@@ -3,6 +3,8 @@ the gold tree, and score the tree after 0, 1, 2 ... answers.
 
     .venv/bin/python -m experiments.clarify --domain taxi --data FILE.jsonl --max-questions 3 --out DIR
     .venv/bin/python -m experiments.clarify --domain taxi --folds NETS --max-questions 3 --out DIR
+    .venv/bin/python -m experiments.clarify --domain taxi --rows DIR/rows.jsonl [--rows ...] \
+        [--only-folds new-f0,new-f1] --max-questions 3 --out DIR2
 
 FILE holds {"description", "tree"} rows, translated by --model (a model file; default: the shipped
 one). --folds decodes instead the fold networks a translation experiment kept (--keep-networks),
@@ -13,6 +15,11 @@ Writes DIR/summary.json (`exact_by_questions` and `policy_by_questions`: accurac
 most 0, 1, ... answers; `mean_questions`; `asked_none_share` and `asked_none_exact` in %; `n`; the
 same by the number of questions in the gold tree and by fold), DIR/summary.md and DIR/rows.jsonl
 (each description's questions, answers and trees).
+
+--rows translates nothing: it summarizes rows written before (committed rows.jsonl files), merged
+over the files given (a row repeated word for word is kept once) and kept to the folds whose names
+end as --only-folds says. It puts figures of runs made in different sessions (one fold each, say)
+in one table, and compares two translators on the same folds, from committed files alone.
 """
 
 from __future__ import annotations
@@ -22,7 +29,7 @@ import json
 import sys
 from collections import defaultdict
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Sequence
 
 import torch
 
@@ -107,6 +114,42 @@ def summarize(rows: list[dict], max_questions: int) -> dict:
     return out
 
 
+def fold_matches(fold: str, wanted: Optional[Sequence[str]]) -> bool:
+    """A fold named e.g. "taxi-v7-new-f3" is wanted as "new-f3", "f3" or its whole name."""
+    return wanted is None or any(fold == w or fold.endswith("-" + w) for w in wanted)
+
+
+def merge_rows(files: Sequence[Path], wanted: Optional[Sequence[str]], domain: str) -> list[dict]:
+    """The rows of `files` in order, each (fold, id) once, kept to the `wanted` folds. Raises
+    ValueError for a file that is not rows of this command, a row of another domain, or one
+    (fold, id) with two different results: two runs of one fold that disagree are not merged."""
+    seen: dict[tuple[str, str], dict] = {}
+    for path in files:
+        try:
+            lines = path.read_text(encoding="utf-8").splitlines()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ValueError(f"cannot read {path}: {exc}") from None
+        for number, line in enumerate(lines, 1):
+            if not line.strip():
+                continue
+            try:
+                row = json.loads(line)
+                key = (row["fold"], row["id"])
+                complete = all(k in row for k in ("exact", "policy", "questions", "gold_questions"))
+            except (json.JSONDecodeError, TypeError, KeyError):
+                complete = False
+            if not complete:
+                raise ValueError(f"{path}:{number} is not a row of experiments.clarify")
+            if row.get("domain", domain) != domain:
+                raise ValueError(f"{path}:{number} is a {row['domain']} row, not {domain}")
+            if key in seen and seen[key] != row:
+                raise ValueError(f"{path}:{number}: fold {key[0]}, description {key[1]} has another result in an "
+                                 "earlier file; merge the runs of one fold from one file")
+            if fold_matches(row["fold"], wanted):
+                seen.setdefault(key, row)
+    return list(seen.values())
+
+
 def markdown(summary: dict, command: str, max_questions: int) -> str:
     heads = " | ".join(f"after {j}" for j in range(max_questions + 1))
     bar = "|---" * (max_questions + 4)
@@ -141,13 +184,35 @@ def main(argv: Optional[list[str]] = None) -> None:
     parser.add_argument("--protocol", default="new", help="only the folds of this protocol (default: new)")
     parser.add_argument("--decode-as", default=None, help="with --folds: decode the kept networks with this registered "
                                                        "model's decoding settings (a model that trains the same networks)")
+    parser.add_argument("--rows", type=Path, action="append", help="summarize these rows.jsonl files (repeatable) "
+                                                                     "instead of translating")
+    parser.add_argument("--only-folds", default=None, help="with --rows: only these folds, comma-separated "
+                                                          "(e.g. new-f0,new-f1)")
     parser.add_argument("--max-questions", type=int, default=3)
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     get_domain(args.domain)
-    if (args.data is None) == (args.folds is None):
-        parser.error("give --data FILE (with --model) or --folds DIR")
+    if sum(x is not None for x in (args.data, args.folds, args.rows)) != 1:
+        parser.error("give one of --data FILE (with --model), --folds DIR or --rows FILE")
+    if args.only_folds is not None and args.rows is None:
+        parser.error("--only-folds goes with --rows")
+    command = "python -m experiments.clarify " + " ".join(argv if argv is not None else sys.argv[1:])
+    if args.rows is not None:
+        wanted = [w.strip() for w in args.only_folds.split(",") if w.strip()] if args.only_folds else None
+        if wanted is not None and (args.out / "rows.jsonl").resolve() in {p.resolve() for p in args.rows}:
+            parser.error(f"--only-folds would drop the other folds' rows from {args.out / 'rows.jsonl'}: "
+                         "write to another --out")
+        try:
+            rows = merge_rows(args.rows, wanted, args.domain)
+        except ValueError as exc:
+            parser.error(str(exc))
+        if not rows:
+            parser.error("no rows of the folds asked for in " + ", ".join(map(str, args.rows)))
+        if any(len(r["exact"]) != args.max_questions + 1 for r in rows):
+            parser.error(f"these rows were not made with --max-questions {args.max_questions}")
+        write_summary(rows, args.out, args.max_questions, command)
+        return
     cache = MiniLMCache()
     jobs: list[tuple[str, LoadedModel, list[tuple[str, Tree, str]]]] = []
     if args.folds is not None:
@@ -169,28 +234,35 @@ def main(argv: Optional[list[str]] = None) -> None:
         model = args.model or find_model(args.domain)
         jobs.append(("data", load_networks(torch.load(model, weights_only=False), cache),
                      [(r["description"], parse_tree(r["tree"], vocab), r.get("id", str(i))) for i, r in enumerate(rows)]))
-    args.out.mkdir(parents=True, exist_ok=True)
-    all_rows, by_fold = [], {}
-    with (args.out / "rows.jsonl").open("w") as fh:
-        for fold, loaded, items in jobs:
-            rows = []
-            for text, gold, key in items:
-                row = {"fold": fold, "domain": args.domain, "id": key, **simulate(loaded, args.domain, text, gold, args.max_questions)}
-                fh.write(json.dumps(row) + "\n")
-                rows.append(row)
-            by_fold[fold] = summarize(rows, args.max_questions)
-            all_rows += rows
-            print(f"{fold}: exact {by_fold[fold]['exact_by_questions']}", file=sys.stderr)
-    summary = summarize(all_rows, args.max_questions)
-    if len(by_fold) > 1:
-        summary["by_fold"] = {k: {"n": v["n"], "exact_by_questions": v["exact_by_questions"],
-                                  "mean_questions": v["mean_questions"]} for k, v in by_fold.items()}
-    command = "python -m experiments.clarify " + " ".join(argv if argv is not None else sys.argv[1:])
-    summary["command"] = command
-    (args.out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    (args.out / "summary.md").write_text(markdown(summary, command, args.max_questions))
-    print((args.out / "summary.md").read_text())
+    all_rows = []
+    for fold, loaded, items in jobs:
+        rows = [{"fold": fold, "domain": args.domain, "id": key, **simulate(loaded, args.domain, text, gold, args.max_questions)}
+                for text, gold, key in items]
+        print(f"{fold}: exact {summarize(rows, args.max_questions)['exact_by_questions']}", file=sys.stderr)
+        all_rows += rows
+    write_summary(all_rows, args.out, args.max_questions, command)
 
+
+def write_summary(rows: list[dict], out: Path, max_questions: int, command: str) -> None:
+    """DIR/rows.jsonl, DIR/summary.json and DIR/summary.md; each file is written whole or left as
+    it was (rows are read before, so --rows may name DIR/rows.jsonl itself)."""
+    by_fold: dict[str, list[dict]] = defaultdict(list)
+    for r in rows:
+        by_fold[r["fold"]].append(r)
+    summary = summarize(rows, max_questions)
+    if len(by_fold) > 1:
+        summary["by_fold"] = {k: {"n": len(v), "exact_by_questions": s["exact_by_questions"],
+                                  "mean_questions": s["mean_questions"]}
+                              for k, v in sorted(by_fold.items()) for s in [summarize(v, max_questions)]}
+    summary["command"] = command
+    out.mkdir(parents=True, exist_ok=True)
+    texts = {"rows.jsonl": "".join(json.dumps(r) + "\n" for r in rows),
+             "summary.json": json.dumps(summary, indent=1) + "\n", "summary.md": markdown(summary, command, max_questions)}
+    for name, text in texts.items():
+        tmp = out / f".{name}.tmp"
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(out / name)
+    print(texts["summary.md"])
 
 if __name__ == "__main__":
     main()

@@ -268,3 +268,72 @@ def test_the_cross_fitted_threshold_never_reads_the_held_out_writers_rows(tmp_pa
     path.write_text(json.dumps({"fold": "data", "domain": "highway", "id": "a-000", "confidence": [0.9], "exact": [True]}) + "\n")
     main(["--rows", str(path), "--precision", "1.0", "--out", str(tmp_path / "t.md")])
     assert "| highway | 1 |" in (tmp_path / "t.md").read_text()
+
+
+def _clarify_row(fold: str, key: str, exact: list, asked: int = 0, gold_questions: int = 2) -> dict:
+    return {"fold": fold, "domain": "taxi", "id": key, "questions": ["q"] * asked, "exact": exact, "policy": exact,
+            "gold_questions": gold_questions}
+
+
+def test_committed_rows_are_summarized_over_chosen_folds_and_merged_without_repeats(tmp_path, capsys):
+    """experiments.clarify --rows: figures of runs made apart (one fold a session) come from the
+    committed rows alone, kept to the folds asked for; a row given twice counts once, and two
+    different results for one description of one fold are refused, not averaged."""
+    from experiments.clarify import main
+
+    a, b = tmp_path / "a.jsonl", tmp_path / "b.jsonl"
+    a.write_text("".join(json.dumps(r) + "\n" for r in [
+        _clarify_row("taxi-v7-new-f0", "w-0", [True, True]), _clarify_row("taxi-v7-new-f0", "w-1", [False, True], 1),
+        _clarify_row("taxi-v7-new-f1", "w-2", [False, False], 1, 5)]))
+    b.write_text(json.dumps(_clarify_row("taxi-v7-new-f3", "w-3", [False, False], 1)) + "\n" + a.read_text().splitlines()[0] + "\n")
+    out = tmp_path / "both"
+    main(["--domain", "taxi", "--rows", str(a), "--rows", str(b), "--max-questions", "1", "--out", str(out)])
+    got = json.loads((out / "summary.json").read_text())
+    assert got["n"] == 4 and got["exact_by_questions"] == [25.0, 50.0] and got["mean_questions"] == 0.75
+    assert got["asked_none_share"] == 25.0 and got["asked_none_exact"] == 100.0
+    assert sorted(got["by_fold"]) == ["taxi-v7-new-f0", "taxi-v7-new-f1", "taxi-v7-new-f3"]
+    assert len((out / "rows.jsonl").read_text().splitlines()) == 4
+    # the merged rows summarize to the same figures again, from the output folder itself
+    main(["--domain", "taxi", "--rows", str(out / "rows.jsonl"), "--max-questions", "1", "--out", str(out)])
+    assert {k: v for k, v in json.loads((out / "summary.json").read_text()).items() if k != "command"} == \
+        {k: v for k, v in got.items() if k != "command"}
+
+    main(["--domain", "taxi", "--rows", str(a), "--only-folds", "new-f0", "--max-questions", "1", "--out", str(tmp_path / "f0")])
+    only = json.loads((tmp_path / "f0" / "summary.json").read_text())
+    assert only["n"] == 2 and only["exact_by_questions"] == [50.0, 100.0] and "by_fold" not in only
+
+    conflict, broken, binary = tmp_path / "c.jsonl", tmp_path / "broken.jsonl", tmp_path / "binary.jsonl"
+    conflict.write_text(json.dumps(_clarify_row("taxi-v7-new-f0", "w-0", [False, False])) + "\n")
+    broken.write_text(json.dumps(_clarify_row("taxi-v7-new-f0", "w-9", [True, True])) + "\n{not json\n")
+    binary.write_bytes(b"\x00\xff\xfe")
+    refusals = [
+        (["--rows", str(out / "rows.jsonl"), "--only-folds", "f0", "--out", str(out)], "would drop the other folds"),
+        (["--rows", str(a), "--only-folds", "f9", "--out", str(tmp_path / "none")], "no rows of the folds"),
+        (["--rows", str(a), "--max-questions", "3", "--out", str(tmp_path / "x")], "not made with --max-questions 3"),
+        (["--rows", str(a), "--rows", str(conflict), "--out", str(tmp_path / "y")], "has another result"),
+        (["--rows", str(broken), "--out", str(tmp_path / "z")], "broken.jsonl:2 is not a row"),
+        (["--rows", str(binary), "--out", str(tmp_path / "z")], "cannot read"),
+        (["--rows", str(a), "--only-folds", "f0", "--data", str(a), "--out", str(tmp_path / "w")], "give one of"),
+    ]
+    for args, needle in refusals:
+        with pytest.raises(SystemExit) as exc:
+            main(["--domain", "taxi", *([] if "--max-questions" in args else ["--max-questions", "1"]), *args])
+        assert exc.value.code == 2
+        assert needle in capsys.readouterr().err, needle
+    assert len((out / "rows.jsonl").read_text().splitlines()) == 4  # nothing lost by a refusal
+
+
+def test_every_committed_clarify_summary_is_what_its_committed_rows_say():
+    from pathlib import Path
+
+    from experiments.clarify import merge_rows, summarize
+
+    folders = [p.parent for p in (Path(__file__).resolve().parents[1] / "results" / "clarify").glob("**/summary.json")]
+    assert folders
+    for folder in folders:
+        committed = json.loads((folder / "summary.json").read_text())
+        domain = json.loads((folder / "rows.jsonl").read_text().splitlines()[0])["fold"].split("-")[0]
+        rows = merge_rows([folder / "rows.jsonl"], None, domain)
+        again = summarize(rows, len(rows[0]["exact"]) - 1)
+        for key in ("n", "exact_by_questions", "policy_by_questions", "mean_questions", "asked_none_share", "asked_none_exact"):
+            assert again[key] == committed[key], (folder.name, key)

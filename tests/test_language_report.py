@@ -299,3 +299,22 @@ def test_translation_experiment_rejects_a_bad_plan_or_nothing_to_summarise(tmp_p
                               str(tmp_path / "empty"), "--summarize-only"])
     assert out.exit_code == 2 and "no folds to summarise" in out.output
     assert not (tmp_path / "empty").exists()  # nothing written
+
+
+def test_search_errors_score_the_gold_tree_exactly_as_the_beam_scores_its_own(one_torch_thread):
+    """experiments.translation.search_errors: decoding held to a tree gives that tree the score the
+    beam ranked it by, so "gold above the returned tree" means the search missed it."""
+    from experiments.translation.search_errors import judge
+    from nl2policy.language.translate import get_model
+    from nl2policy.domains import get_domain
+    from nl2policy.trees import from_tokens, to_tokens
+
+    translator = get_model("taxi").translator
+    text = "If there is a passenger, drive to the airport; otherwise wait."
+    returned = translator.hypotheses(text)[0][0]
+    same = judge(translator, text, returned)
+    assert same["right"] and same["in_wide_beam"]
+    assert same["gold_score"] == pytest.approx(same["pred_score"], abs=1e-6)
+    assert to_tokens(returned) == ["has_passenger", "go_airport", "wait"]
+    swapped = judge(translator, text, from_tokens(["has_passenger", "wait", "go_airport"], get_domain("taxi").vocab))
+    assert not swapped["right"] and swapped["gold_score"] < swapped["pred_score"]
