@@ -211,7 +211,7 @@ def main(argv: Optional[list[str]] = None) -> None:
             parser.error("no rows of the folds asked for in " + ", ".join(map(str, args.rows)))
         if any(len(r["exact"]) != args.max_questions + 1 for r in rows):
             parser.error(f"these rows were not made with --max-questions {args.max_questions}")
-        write_summary(rows, args.out, args.max_questions, command)
+        save(parser, rows, args.out, args.max_questions, command)
         return
     cache = MiniLMCache()
     jobs: list[tuple[str, LoadedModel, list[tuple[str, Tree, str]]]] = []
@@ -240,7 +240,15 @@ def main(argv: Optional[list[str]] = None) -> None:
                 for text, gold, key in items]
         print(f"{fold}: exact {summarize(rows, args.max_questions)['exact_by_questions']}", file=sys.stderr)
         all_rows += rows
-    write_summary(all_rows, args.out, args.max_questions, command)
+    save(parser, all_rows, args.out, args.max_questions, command)
+
+
+def save(parser: argparse.ArgumentParser, rows: list[dict], out: Path, max_questions: int, command: str) -> None:
+    """`write_summary`, with a folder that cannot be written said in one line (exit 2)."""
+    try:
+        write_summary(rows, out, max_questions, command)
+    except OSError as exc:
+        parser.error(f"cannot write the results to {out}: {exc.strerror or exc}")
 
 
 def write_summary(rows: list[dict], out: Path, max_questions: int, command: str) -> None:

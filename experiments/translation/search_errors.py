@@ -97,8 +97,11 @@ def main(argv: Optional[list[str]] = None) -> None:
               "| fold | description | questions in the tree | gold | returned |", "|---|---|---:|---:|---:|"]
     lines += [f"| {e['fold']} | {e['id']} | {e['questions']} | {e['gold_score']:.3f} ({e['gold_nodes']}) | "
               f"{e['pred_score']:.3f} ({e['pred_nodes']}) |" for e in errors]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n")
+    try:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text("\n".join(lines) + "\n")
+    except OSError as exc:
+        parser.error(f"cannot write the report to {args.out}: {exc.strerror or exc}")
     print("\n".join(lines[:9]))
 
 
