@@ -25,7 +25,7 @@ from experiments.clarify import load_networks, questions_in
 from experiments.translation.evaluate import PROTOCOL_ROUNDS
 from nl2policy.domains import get_domain
 from nl2policy.language.corpus import load_corpus
-from nl2policy.language.decoding import search
+from nl2policy.language.decoding import ranking_score, search
 from nl2policy.language.models.pretrained import MiniLMCache
 from nl2policy.language.translator import TrainedTranslator, collate
 from nl2policy.trees import Tree, to_tokens
@@ -33,16 +33,10 @@ from nl2policy.trees import Tree, to_tokens
 WIDE = 16
 
 
-def ranked(score: float, tokens: list[str], length_norm: float) -> float:
-    """The beam's ranking score of a finished tree (decoding.search)."""
-    return score / max(1, len(tokens)) ** length_norm if length_norm else score
-
-
 @torch.inference_mode()
 def judge(translator: TrainedTranslator, text: str, gold: Tree) -> dict:
-    """One description: the returned tree, and where the gold tree stands against it."""
-    for net in translator.nets:
-        net.eval()
+    """One description: the returned tree, and where the gold tree stands against it (`hypotheses`,
+    called first, puts the networks in eval mode for the held decoding too)."""
     gold_tokens = to_tokens(gold)
     best = translator.hypotheses(text)[0]
     pred_tokens = to_tokens(best[0])
@@ -53,8 +47,9 @@ def judge(translator: TrainedTranslator, text: str, gold: Tree) -> dict:
 
     forced = search(translator, collate([translator.encode(text)]), [text], None, [only_gold], 1)[0][0]
     wide = translator.hypotheses(text, width=WIDE)
-    return {"right": pred_tokens == gold_tokens,
-            "gold_score": ranked(forced[2], gold_tokens, norm), "pred_score": ranked(best[2], pred_tokens, norm),
+    gold_score, pred_score = ranking_score(forced[2], len(gold_tokens), norm), ranking_score(best[2], len(pred_tokens), norm)
+    return {"right": pred_tokens == gold_tokens, "search_error": gold_score > pred_score,
+            "gold_score": gold_score, "pred_score": pred_score,
             "gold_nodes": len(gold_tokens), "pred_nodes": len(pred_tokens),
             "in_wide_beam": any(h[0] is not None and to_tokens(h[0]) == gold_tokens for h in wide)}
 
@@ -84,15 +79,14 @@ def main(argv: Optional[list[str]] = None) -> None:
             if not row["right"]:
                 errors.append({"fold": path.stem, "id": specs[i].id, "questions": questions_in(specs[i].tree, args.domain), **row})
         print(f"{path.stem}: {len(errors)} errors so far of {n}", file=sys.stderr)
-    search_errors = [e for e in errors if e["gold_score"] > e["pred_score"]]
     command = "python -m experiments.translation.search_errors " + " ".join(argv if argv is not None else sys.argv[1:])
     lines = ["# Search errors or model errors", "", f"Made by: `{command}`  ",
              f"Folds: {', '.join(p.stem for p in paths)}; {n} held-out descriptions, {len(errors)} translated wrong.", "",
              "| | wrong | gold ranked above the returned tree (search error) | gold ranked below (model error) "
              f"| gold in a {WIDE}-wide beam |", "|---|---:|---:|---:|---:|"]
     for label, group in (("all", errors), ("trees of 4+ questions", [e for e in errors if e["questions"] >= 4])):
-        lines.append(f"| {label} | {len(group)} | {sum(e in search_errors for e in group)} | "
-                     f"{sum(e not in search_errors for e in group)} | {sum(e['in_wide_beam'] for e in group)} |")
+        searched = sum(e["search_error"] for e in group)
+        lines.append(f"| {label} | {len(group)} | {searched} | {len(group) - searched} | {sum(e['in_wide_beam'] for e in group)} |")
     lines += ["", "Each error: the beam's score per node of the gold tree and of the returned one (nodes).", "",
               "| fold | description | questions in the tree | gold | returned |", "|---|---|---:|---:|---:|"]
     lines += [f"| {e['fold']} | {e['id']} | {e['questions']} | {e['gold_score']:.3f} ({e['gold_nodes']}) | "

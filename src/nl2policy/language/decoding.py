@@ -39,6 +39,12 @@ def tree_probability(node_probs: dict[int, float]) -> float:
     return math.prod(node_probs.values())
 
 
+def ranking_score(score: float, nodes: int, length_norm: float) -> float:
+    """How the beam ranks a finished tree of `nodes` nodes whose log-probabilities sum to `score`:
+    per node (to the power `length_norm`), or the sum itself when `length_norm` is 0."""
+    return score / max(1, nodes) ** length_norm if length_norm else score
+
+
 def beam_search(model: TrainedTranslator, batch: Batch, texts: list[str],
                 found: Optional[Sequence[Findings]] = None) -> list[tuple[Tree, dict[int, float]]]:
     """The best tree of each text (see `search`)."""
@@ -160,7 +166,7 @@ def search(model: TrainedTranslator, batch: Batch, texts: list[str], found: Opti
     flat = score.view(-1).tolist()
     trees = [from_tokens(p, vocab) if math.isfinite(flat[r]) and p and next_slot(p, vocab) is None else None
              for r, p in enumerate(prefixes)]
-    rank = [f / max(1, len(p)) ** length_norm if length_norm else f for f, p in zip(flat, prefixes)]
+    rank = [ranking_score(f, len(p), length_norm) for f, p in zip(flat, prefixes)]
     out = []
     for b in range(B):  # beams stay sorted, but finished ones may have been overtaken
         rows = sorted((r for r in range(b * K, b * K + K) if trees[r] is not None), key=lambda r: -rank[r])
