@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import atexit
 import os
+import shlex
 import shutil
 import statistics
 import sys
@@ -45,6 +46,13 @@ def main() -> None:
     parser.add_argument("--latency-only", action="store_true",
                         help="Skip training: time translation with the shipped model (e.g. at another --latency-threads)")
     args = parser.parse_args()
+    from experiments.checks import before_work
+    from nl2policy.console import out_dir_or_fail, out_file_or_fail
+
+    if args.save_to is not None:  # checked before an hour of training, not after it
+        before_work(out_dir_or_fail, args.save_to, "--save-to")
+    if args.out is not None:
+        before_work(out_file_or_fail, Path(args.out))
     scratch = tempfile.mkdtemp(prefix="nl2policy-bench-")  # both trainings' files; removed at exit
     atexit.register(shutil.rmtree, scratch, ignore_errors=True)
     os.environ["NL2POLICY_HOME"] = os.path.join(scratch, "home")
@@ -140,11 +148,7 @@ def main() -> None:
     net = {v: statistics.median(ms) for v, ms in network_ms.items()}
     median = statistics.median(latencies)
     p90 = latencies[int(0.9 * len(latencies))]
-    lines = [f"command: .venv/bin/python benchmarks/translator_speed.py --domain {args.domain} --threads {args.threads}"
-             + f" --latency-threads {args.latency_threads}"
-             + (f" --model {args.model}" if args.model else "")
-             + (" --no-compare" if args.no_compare else "") + (" --latency-only" if args.latency_only else "")
-             + (f" --save-to {args.save_to}" if args.save_to else ""),
+    lines = ["command: .venv/bin/python benchmarks/translator_speed.py " + shlex.join(sys.argv[1:]),
              f"model {name}, domain {args.domain}, {args.threads} torch threads training, {latency_threads} translating "
              f"(torch's default here: {default_threads}), "
              f"{os.cpu_count()} cores ({machine()}), "

@@ -34,7 +34,9 @@ from typing import Optional, Sequence
 import torch
 
 import experiments.translation.baselines  # noqa: F401  (registers the lab's model names)
+from experiments.checks import before_work
 from experiments.translation.evaluate import PROTOCOL_ROUNDS, trained_config
+from nl2policy.console import out_dir_or_fail
 from nl2policy.domains import get_domain
 from nl2policy.language.clarify import Answer, agrees, situations
 from nl2policy.language.corpus import load_corpus
@@ -213,6 +215,7 @@ def main(argv: Optional[list[str]] = None) -> None:
             parser.error(f"these rows were not made with --max-questions {args.max_questions}")
         save(parser, rows, args.out, args.max_questions, command)
         return
+    before_work(out_dir_or_fail, args.out)  # before the translating, not after it
     cache = MiniLMCache()
     jobs: list[tuple[str, LoadedModel, list[tuple[str, Tree, str]]]] = []
     if args.folds is not None:

@@ -315,6 +315,7 @@ def test_committed_rows_are_summarized_over_chosen_folds_and_merged_without_repe
         (["--rows", str(binary), "--out", str(tmp_path / "z")], "cannot read"),
         (["--rows", str(a), "--only-folds", "f0", "--data", str(a), "--out", str(tmp_path / "w")], "give one of"),
         (["--rows", str(a), "--out", str(a / "inside-a-file")], "cannot write the results"),
+        (["--folds", str(tmp_path), "--out", str(a / "inside-a-file")], "cannot write into --out folder"),  # before any work
     ]
     for args, needle in refusals:
         with pytest.raises(SystemExit) as exc:

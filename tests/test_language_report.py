@@ -318,3 +318,15 @@ def test_search_errors_score_the_gold_tree_exactly_as_the_beam_scores_its_own(on
     assert to_tokens(returned) == ["has_passenger", "go_airport", "wait"]
     swapped = judge(translator, text, from_tokens(["has_passenger", "wait", "go_airport"], get_domain("taxi").vocab))
     assert not swapped["right"] and swapped["gold_score"] < swapped["pred_score"]
+
+
+def test_search_errors_refuses_an_unwritable_report_before_reading_any_fold(tmp_path, capsys):
+    from experiments.translation.search_errors import main
+
+    (tmp_path / "a-file").write_text("kept\n")
+    with pytest.raises(SystemExit) as exc:
+        main(["--domain", "taxi", "--folds", str(tmp_path / "no-folds"), "--fold-model", "v7",
+              "--out", str(tmp_path / "a-file" / "report.md")])
+    assert exc.value.code == 2
+    assert "is a file, not a folder" in capsys.readouterr().err  # said before "no fold networks"
+    assert (tmp_path / "a-file").read_text() == "kept\n"

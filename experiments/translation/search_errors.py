@@ -21,8 +21,10 @@ from typing import Optional
 
 import torch
 
+from experiments.checks import before_work
 from experiments.clarify import load_networks, questions_in
 from experiments.translation.evaluate import PROTOCOL_ROUNDS
+from nl2policy.console import out_dir_or_fail, out_file_or_fail
 from nl2policy.domains import get_domain
 from nl2policy.language.corpus import load_corpus
 from nl2policy.language.decoding import ranking_score, search
@@ -62,6 +64,8 @@ def main(argv: Optional[list[str]] = None) -> None:
     parser.add_argument("--protocol", default="new")
     parser.add_argument("--out", type=Path, required=True, help="the report (markdown)")
     args = parser.parse_args(argv)
+    before_work(out_dir_or_fail, args.out.parent, "--out's")  # before the decoding, not after it
+    before_work(out_file_or_fail, args.out)
     torch.set_num_threads(1)
     get_domain(args.domain)
     paths = sorted(args.folds.glob(f"{args.domain}-{args.fold_model}-{args.protocol}-*.pt"))
