@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import shlex
 import statistics
 import sys
 import time
@@ -57,7 +58,7 @@ def main() -> None:
             result = translate(args.domain, text, answers=answers)
             times[key].append(time.perf_counter() - start)
             asked += 1
-    command = "command: .venv/bin/python benchmarks/clarify_speed.py " + " ".join(sys.argv[1:])
+    command = "command: .venv/bin/python benchmarks/clarify_speed.py " + shlex.join(sys.argv[1:])
     lines = [command, f"clarify speed, {args.domain}, model {get_model(args.domain).translator.name}: {len(texts)} round-2 "
              "descriptions, warm, one torch thread, "
              f"load average {os.getloadavg()[0]:.2f}", f"questions answered: {asked}",

@@ -96,7 +96,6 @@ def main(argv: Optional[list[str]] = None) -> None:
     lines += [f"| {e['fold']} | {e['id']} | {e['questions']} | {e['gold_score']:.3f} ({e['gold_nodes']}) | "
               f"{e['pred_score']:.3f} ({e['pred_nodes']}) |" for e in errors]
     try:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text("\n".join(lines) + "\n")
     except OSError as exc:
         parser.error(f"cannot write the report to {args.out}: {exc.strerror or exc}")
