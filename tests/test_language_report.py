@@ -319,24 +319,3 @@ def test_search_errors_score_the_gold_tree_exactly_as_the_beam_scores_its_own(on
     swapped = judge(translator, text, from_tokens(["has_passenger", "wait", "go_airport"], get_domain("taxi").vocab))
     assert not swapped["right"] and swapped["gold_score"] < swapped["pred_score"]
 
-
-def test_the_confidence_probe_holds_each_member_to_the_returned_tree(one_torch_thread):
-    """experiments.translation.confidence_probe: decoding held to the returned tree gives it the
-    averaged probability the beam reported; the members' geometric mean is never above it, and
-    one member alone is its own mean."""
-    from dataclasses import replace
-
-    from experiments.translation.confidence_probe import SIGNALS, held_probability, signals
-    from nl2policy.language.decoding import tree_probability
-    from nl2policy.language.translate import get_model
-
-    translator = get_model("taxi").translator
-    text = "If there is a passenger, drive to the airport; otherwise go to the city unless the traffic is heavy."
-    members = [replace(translator, nets=[net], findings=None) for net in translator.nets]
-    tree, values = signals(translator, members, text)
-    _, node_probs, _ = translator.hypotheses(text)[0]
-    assert values[SIGNALS[0]] == pytest.approx(tree_probability(node_probs), abs=1e-9)
-    assert held_probability(translator, text, tree) == pytest.approx(values[SIGNALS[0]], rel=1e-5)
-    assert 0.0 < values[SIGNALS[1]] <= values[SIGNALS[0]] + 1e-9
-    alone = signals(members[0], members[:1], text)[1]
-    assert alone[SIGNALS[1]] == pytest.approx(alone[SIGNALS[0]], rel=1e-5)
