@@ -129,5 +129,4 @@ MODELS["v5-mean"] = MODELS["v6"]
 # description and one augmented copy) against v3's 60 (30 epochs x 2), and lost 16 points to v3 on
 # leave-writers-out (results/translation/lwo/). Five augmented copies give v6's 10 epochs v3's 60
 # readings while keeping v6's 40,000 synthetic ones. Judged on leave-writers-out and NWNT together.
-# Shipped since 2026-12-07 (DEFAULT_MODEL; recipes/v7.toml).
-MODELS["v7"] = load_recipe("v7")
+# Shipped since 2026-12-07: the product registers it as DEFAULT_MODEL (recipes/v7.toml).
