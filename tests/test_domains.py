@@ -205,7 +205,7 @@ def test_a_misread_example_reaches_its_tree_by_answering_the_translators_questio
     text = ("If the lander is tilted to the left, fire the right engine, and if it is tilted to the right, fire the "
             "left engine. Otherwise fire the main engine when it is falling fast, and fire no engine when it is not.")
     answers: list = []
-    reading = translate("lunar", text)  # the shipped v3 gets it wrong here (a better one need not)
+    reading = translate("lunar", text)  # v3 and v7 read it with two branches swapped; any misreading is asked about
     while reading.questions and len(answers) < 3:
         situation = dict(reading.questions[0].situation)
         answers.append({"situation": situation, "do": d.example_tree.act(situation)})

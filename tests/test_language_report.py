@@ -330,3 +330,29 @@ def test_search_errors_refuses_an_unwritable_report_before_reading_any_fold(tmp_
     assert exc.value.code == 2
     assert "is a file, not a folder" in capsys.readouterr().err  # said before "no fold networks"
     assert (tmp_path / "a-file").read_text() == "kept\n"
+
+
+def test_fresh_pairs_refuses_a_missing_translator_file_in_one_line(tmp_path, capsys):
+    from experiments.translation.fresh_pairs import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--domain", "lunar", "--file", f"gone={tmp_path / 'none.pt'}"])
+    assert exc.value.code == 2
+    assert "no translator file at" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["--domain", "lunar", "--file", "no-path-given"])
+    assert exc.value.code == 2
+    assert "expected NAME=PATH" in capsys.readouterr().err
+
+
+def test_fresh_pairs_reads_the_shipped_file_once_per_findings_weight(tmp_path):
+    from experiments.translation.fresh_pairs import main
+    from nl2policy.language.translate import shipped_path
+
+    out = tmp_path / "reading.md"
+    main(["--domain", "lunar", "--pairs", "3", "--file", f"shipped={shipped_path('lunar')}",
+          "--findings-cost", "0", "--findings-cost", "1", "--out", str(out)])
+    rows = [line for line in out.read_text().splitlines() if line.startswith("| shipped |")]
+    assert len(rows) == 2
+    assert [row.split("|")[5].strip() for row in rows] == ["0", "1"]
+    assert all(0 <= int(row.split("|")[6]) <= 3 for row in rows)

@@ -133,7 +133,13 @@ def main(domain: str = "lunar", synthetic: int = 1000, test_pairs: int = 240, se
     command = (f"python -m experiments.translation.leave_style_out --domain {domain} --synthetic {synthetic} "
                f"--test-pairs {test_pairs} --seed {seed} --out {out}")
     runs_path = out / domain / "runs.json"
-    rows = [r for r in (json.loads(runs_path.read_text()) if runs_path.is_file() else [])
+    kept_rows = json.loads(runs_path.read_text()) if runs_path.is_file() else []
+    others = sorted({r["model"] for r in kept_rows} - {DEFAULT_MODEL})
+    if others:  # resuming would rewrite their table as this version's
+        err.print(f"[red]error:[/red] {runs_path} holds translator {', '.join(others)}'s folds; "
+                  f"write {DEFAULT_MODEL}'s to another --out")
+        raise SystemExit(2)
+    rows = [r for r in kept_rows
             if r["synthetic_per_network"] == synthetic and r["seed"] == seed and r["test_pairs"] == test_pairs]
     for name in fold or list(FOLDS):
         if any(r["fold"] == name for r in rows):

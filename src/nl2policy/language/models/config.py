@@ -5,7 +5,7 @@ from __future__ import annotations
 import tomllib
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
-from typing import Union
+from typing import Optional, Union
 
 
 @dataclass(frozen=True)
@@ -71,18 +71,21 @@ MODELS: dict[str, ModelConfig] = {
 """The product's configs: the shipped version (DEFAULT_MODEL, from its recipe) and the smoke
 model. The lab registers the paper's four and the default's parts (experiments/translation/baselines.py)."""
 RECIPES = Path(__file__).resolve().parent.parent / "recipes"
-"""The shipped translator's recipes, one small file per version (recipes/v3.toml)."""
+"""The shipped translator's recipe, one small file (recipes/v7.toml). Earlier versions' and
+candidates' recipes live in the lab (experiments/translation/recipes/)."""
 
 
-def load_recipe(version: str) -> ModelConfig:
-    """A shipped version's config from its recipe file; fields it leaves out take their defaults."""
-    data = tomllib.loads((RECIPES / f"{version}.toml").read_text())
+def load_recipe(version: str, folder: Optional[Path] = None) -> ModelConfig:
+    """A version's config from its recipe file (in `folder`, default RECIPES); fields it leaves
+    out take their defaults."""
+    path = (folder or RECIPES) / f"{version}.toml"
+    data = tomllib.loads(path.read_text())
     unknown = sorted(set(data) - {f.name for f in fields(ModelConfig)})
     if unknown:
-        raise ValueError(f"{RECIPES / (version + '.toml')}: unknown settings {', '.join(unknown)}")
+        raise ValueError(f"{path}: unknown settings {', '.join(unknown)}")
     return ModelConfig(**data)
 
 
-DEFAULT_MODEL = "v3"
-"""The shipped translator's version: its models are named DOMAIN-VERSION (taxi-v3)."""
+DEFAULT_MODEL = "v7"
+"""The shipped translator's version: its models are named DOMAIN-VERSION (taxi-v7)."""
 MODELS[DEFAULT_MODEL] = load_recipe(DEFAULT_MODEL)

@@ -1,0 +1,93 @@
+"""Translator files read side by side on one set of fresh synthetic descriptions.
+
+    python -m experiments.translation.fresh_pairs --domain lunar --pairs 200 --seed 4242 \
+        --file shipped=src/nl2policy/domains/lunar/translator-v7.pt --file other=PATH ... \
+        --findings-cost 0 --findings-cost 1 --out results/translation/lunar_reading.md
+
+For a domain nobody has described yet (lunar) this is the only reading we can measure besides
+leave-style-out: each file translates the same `--pairs` descriptions the generator writes with
+`--seed` (a draw no training member used: members draw with seeds from 0 up), once with each
+`--findings-cost` (how much the learned findings weigh in the beam; a decoding choice, so the same
+networks are read both ways). What it cannot tell: how people would describe the domain; the
+descriptions are the generator's own styles, which every file trained on.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+from typing import Optional
+
+from experiments.checks import before_work
+
+
+def _named_file(value: str) -> tuple[str, Path]:
+    name, sep, path = value.partition("=")
+    if not sep or not name or not path:
+        raise argparse.ArgumentTypeError(f"expected NAME=PATH, got {value!r}")
+    return name, Path(path)
+
+
+def score(path: Path, domain: str, pairs: list, findings_cost: float) -> dict:
+    """Exact and policy matches of one file's reading of `pairs` at one findings weight."""
+    from nl2policy.domains import get_domain
+    from nl2policy.language.translate import load_model
+    from nl2policy.language.corpus import policy_key
+
+    translator = load_model(path, domain).translator
+    translator.findings_cost = findings_cost if translator.findings is not None else 0.0
+    decoded = translator.predict([text for text, _ in pairs])
+    exact = sum(tree == gold for (tree, _), (_, gold) in zip(decoded, pairs))
+    policy = sum(policy_key(domain, tree) == policy_key(domain, gold) for (tree, _), (_, gold) in zip(decoded, pairs))
+    return {"model": translator.name, "epochs": translator.cfg.epochs, "synthetic": translator.cfg.synthetic,
+            "findings": translator.findings is not None, "exact": exact, "policy": policy,
+            "example": translator.predict([get_domain(domain).example])[0][0] == get_domain(domain).example_tree}
+
+
+def main(argv: Optional[list[str]] = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--domain", default="lunar")
+    parser.add_argument("--pairs", type=int, default=200)
+    parser.add_argument("--seed", type=int, default=4242)
+    parser.add_argument("--file", type=_named_file, action="append", required=True, help="NAME=PATH of a translator file")
+    parser.add_argument("--findings-cost", type=float, action="append", default=None)
+    parser.add_argument("--out", type=Path, default=None, help="also write the table to this file")
+    args = parser.parse_args(argv)
+    from nl2policy.console import out_file_or_fail
+    from nl2policy.domains import get_domain
+
+    if args.out is not None:
+        before_work(out_file_or_fail, args.out)
+    missing = [str(path) for _, path in args.file if not path.is_file()]
+    if missing:
+        parser.error(f"no translator file at {', '.join(missing)}")
+    import torch
+
+    from nl2policy.language.synthetic import synthetic_pairs
+
+    torch.set_num_threads(1)
+    get_domain(args.domain)
+    pairs = synthetic_pairs(args.domain, args.pairs, args.seed)
+    costs = args.findings_cost or [0.0]
+    lines = [f"# {args.domain}: translator files on {len(pairs)} fresh synthetic descriptions", "",
+             f"Command: `python -m experiments.translation.fresh_pairs {shlex.join(sys.argv[1:] if argv is None else argv)}`",
+             "", f"Descriptions: the generator's, seed {args.seed}. Example: the domain's example text read as its tree.", "",
+             "| file | model | synthetic pairs a network | epochs | findings in the beam | exact | policy | example |",
+             "|---|---|---:|---:|---:|---:|---:|---|"]
+    for name, path in args.file:
+        for cost in costs:
+            row = score(path, args.domain, pairs, cost)
+            weight = f"{cost:g}" if row["findings"] else "- (none saved)"
+            lines.append(f"| {name} | {row['model']} | {row['synthetic']} | {row['epochs']} | {weight} | {row['exact']} | "
+                         f"{row['policy']} | {'right' if row['example'] else 'wrong'} |")
+            print(lines[-1], flush=True)
+    report = "\n".join(lines) + "\n"
+    if args.out is not None:
+        args.out.write_text(report)
+    print(report)
+
+
+if __name__ == "__main__":
+    main()
