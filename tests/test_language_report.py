@@ -343,6 +343,14 @@ def test_fresh_pairs_refuses_a_missing_translator_file_in_one_line(tmp_path, cap
         main(["--domain", "lunar", "--file", "no-path-given"])
     assert exc.value.code == 2
     assert "expected NAME=PATH" in capsys.readouterr().err
+    (tmp_path / "damaged.pt").write_bytes(b"\x00not a translator")
+    with pytest.raises(SystemExit) as exc:
+        main(["--domain", "lunar", "--file", f"bad={tmp_path / 'damaged.pt'}"])
+    assert exc.value.code == 2
+    assert "cannot read a translator from" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["--domain", "mars", "--file", f"bad={tmp_path / 'damaged.pt'}"])
+    assert exc.value.code == 2
 
 
 def test_fresh_pairs_reads_the_shipped_file_once_per_findings_weight(tmp_path):

@@ -30,13 +30,11 @@ def _named_file(value: str) -> tuple[str, Path]:
     return name, Path(path)
 
 
-def score(path: Path, domain: str, pairs: list, findings_cost: float) -> dict:
-    """Exact and policy matches of one file's reading of `pairs` at one findings weight."""
+def score(translator, domain: str, pairs: list, findings_cost: float) -> dict:
+    """Exact and policy matches of one translator's reading of `pairs` at one findings weight."""
     from nl2policy.domains import get_domain
-    from nl2policy.language.translate import load_model
     from nl2policy.language.corpus import policy_key
 
-    translator = load_model(path, domain).translator
     translator.findings_cost = findings_cost if translator.findings is not None else 0.0
     decoded = translator.predict([text for text, _ in pairs])
     exact = sum(tree == gold for (tree, _), (_, gold) in zip(decoded, pairs))
@@ -55,9 +53,9 @@ def main(argv: Optional[list[str]] = None) -> None:
     parser.add_argument("--findings-cost", type=float, action="append", default=None)
     parser.add_argument("--out", type=Path, default=None, help="also write the table to this file")
     args = parser.parse_args(argv)
-    from nl2policy.console import out_file_or_fail
-    from nl2policy.domains import get_domain
+    from nl2policy.console import domain_or_fail, out_file_or_fail
 
+    before_work(domain_or_fail, args.domain)
     if args.out is not None:
         before_work(out_file_or_fail, args.out)
     missing = [str(path) for _, path in args.file if not path.is_file()]
@@ -66,9 +64,15 @@ def main(argv: Optional[list[str]] = None) -> None:
     import torch
 
     from nl2policy.language.synthetic import synthetic_pairs
+    from nl2policy.language.translate import load_model
 
     torch.set_num_threads(1)
-    get_domain(args.domain)
+    translators = []
+    for name, path in args.file:  # every file read before any scoring: a bad one is one line, not a traceback later
+        try:
+            translators.append((name, load_model(path, args.domain).translator))
+        except Exception as exc:  # a damaged, foreign or other domain's file
+            parser.error(f"cannot read a translator from {path}: {type(exc).__name__}: {exc}")
     pairs = synthetic_pairs(args.domain, args.pairs, args.seed)
     costs = args.findings_cost or [0.0]
     lines = [f"# {args.domain}: translator files on {len(pairs)} fresh synthetic descriptions", "",
@@ -76,9 +80,9 @@ def main(argv: Optional[list[str]] = None) -> None:
              "", f"Descriptions: the generator's, seed {args.seed}. Example: the domain's example text read as its tree.", "",
              "| file | model | synthetic pairs a network | epochs | findings in the beam | exact | policy | example |",
              "|---|---|---:|---:|---:|---:|---:|---|"]
-    for name, path in args.file:
+    for name, translator in translators:
         for cost in costs:
-            row = score(path, args.domain, pairs, cost)
+            row = score(translator, args.domain, pairs, cost)
             weight = f"{cost:g}" if row["findings"] else "- (none saved)"
             lines.append(f"| {name} | {row['model']} | {row['synthetic']} | {row['epochs']} | {weight} | {row['exact']} | "
                          f"{row['policy']} | {'right' if row['example'] else 'wrong'} |")
