@@ -6,7 +6,7 @@ Two measurements, both on the random policy and on corpus trees spread over the 
    rate, mean forward speed and the share of decisions in the right lane over `--episodes`
    episodes each, with standard errors, and the rank correlation of the policies' returns.
 2. **Same scene** (paired), both ways: `--paired-episodes` twin scenes are copied into
-   highway-env (``highway_scenes.copy_scene_to``) and both run the policy from there; and every
+   highway-env (``scenes.copy_scene_to``) and both run the policy from there; and every
    one of highway-env's own `--episodes` episodes is replayed in the twin from highway-env's
    scene (``copy_scene_from``). The share of episodes whose return agrees to 1e-6, and the
    crash rate of the replays against highway-env's on the very same episodes.

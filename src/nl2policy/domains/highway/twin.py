@@ -52,8 +52,8 @@ Known differences, each with its reason:
   same lane, not at every such car.
 * Exact ties in position (probability zero) may order differently.
 
-Fidelity against highway-env is measured by ``nl2policy highway-fidelity`` and kept by a test; moving a
-scene between the two simulators is ``highway_scenes.py``.
+Fidelity against highway-env is measured by ``python -m experiments.highway_fidelity`` and kept
+by a test; moving a scene between the two simulators is ``scenes.py``.
 """
 
 from __future__ import annotations
