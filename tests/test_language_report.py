@@ -351,16 +351,74 @@ def test_fresh_pairs_refuses_a_missing_translator_file_in_one_line(tmp_path, cap
     with pytest.raises(SystemExit) as exc:
         main(["--domain", "mars", "--file", f"bad={tmp_path / 'damaged.pt'}"])
     assert exc.value.code == 2
+    assert "mars" in capsys.readouterr().err  # the domain is named, before the file is read
+    with pytest.raises(SystemExit) as exc:
+        main(["--domain", "lunar", "--seed", "-1", "--file", f"bad={tmp_path / 'damaged.pt'}"])
+    assert exc.value.code == 2
+    assert "--seed" in capsys.readouterr().err
 
 
 def test_fresh_pairs_reads_the_shipped_file_once_per_findings_weight(tmp_path):
+    """Each row is the file's own reading of the same fresh pairs at that weight, counted as a
+    direct predict counts it; without --findings-cost the file's own weight is used."""
     from experiments.translation.fresh_pairs import main
-    from nl2policy.language.translate import shipped_path
+    from nl2policy.language.corpus import policy_key
+    from nl2policy.language.synthetic import synthetic_pairs
+    from nl2policy.language.translate import load_model, shipped_path
 
     out = tmp_path / "reading.md"
-    main(["--domain", "lunar", "--pairs", "3", "--file", f"shipped={shipped_path('lunar')}",
+    main(["--domain", "lunar", "--pairs", "6", "--seed", "4242", "--file", f"shipped={shipped_path('lunar')}",
           "--findings-cost", "0", "--findings-cost", "1", "--out", str(out)])
-    rows = [line for line in out.read_text().splitlines() if line.startswith("| shipped |")]
-    assert len(rows) == 2
-    assert [row.split("|")[5].strip() for row in rows] == ["0", "1"]
-    assert all(0 <= int(row.split("|")[6]) <= 3 for row in rows)
+    rows = [[cell.strip() for cell in line.split("|")[1:-1]] for line in out.read_text().splitlines()
+            if line.startswith("| shipped |")]
+    assert [row[4] for row in rows] == ["0", "1"]
+    pairs = synthetic_pairs("lunar", 6, 4242)
+    translator = load_model(shipped_path("lunar"), "lunar").translator
+    for row, cost in zip(rows, (0.0, 1.0)):
+        translator.findings_cost = cost
+        decoded = [tree for tree, _ in translator.predict([text for text, _ in pairs])]
+        assert int(row[5]) == sum(tree == gold for tree, (_, gold) in zip(decoded, pairs))
+        assert int(row[6]) == sum(policy_key("lunar", tree) == policy_key("lunar", gold) for tree, (_, gold) in zip(decoded, pairs))
+    assert rows[1][7] == "right"  # the shipped file reads the domain's example (test_domains checks it too)
+    main(["--domain", "lunar", "--pairs", "2", "--file", f"shipped={shipped_path('lunar')}", "--out", str(out)])
+    own = [line for line in out.read_text().splitlines() if line.startswith("| shipped |")]
+    assert len(own) == 1 and f"| {translator.cfg.findings_cost:g} (its own) |" in own[0]
+
+
+def test_leave_style_out_refuses_to_resume_into_folds_of_other_settings(tmp_path, capsys):
+    """A kept fold of another translator, or one that did not record its recipe, is not rewritten
+    under today's settings: the command stops before training and the file is left as it was."""
+    import json
+
+    from experiments.translation.leave_style_out import main
+    from nl2policy.language.models.config import DEFAULT_MODEL
+
+    folder = tmp_path / "lunar"
+    folder.mkdir()
+    runs = folder / "runs.json"
+    for row in ({"fold": "prose", "model": "v3", "seed": 0, "test_pairs": 240},  # another translator
+                {"fold": "prose", "model": DEFAULT_MODEL, "seed": 0, "test_pairs": 240}):  # settings not recorded
+        runs.write_text(json.dumps([row]))
+        with pytest.raises(SystemExit) as exc:
+            main(domain="lunar", synthetic=600, test_pairs=240, seed=0, out=tmp_path)
+        assert exc.value.code == 2
+        assert "prose" in capsys.readouterr().err
+        assert json.loads(runs.read_text()) == [row]
+
+
+def test_leave_style_out_resumes_only_the_same_recipe_seed_and_test_size():
+    import dataclasses
+    import json
+
+    from experiments.translation.leave_style_out import resumable
+    from nl2policy.language.models.config import DEFAULT_MODEL
+    from nl2policy.language.shipping import shipped_config
+
+    recipe = json.loads(json.dumps(dataclasses.replace(shipped_config("lunar"), synthetic=600).to_dict()))
+    row = {"fold": "rule lists", "model": DEFAULT_MODEL, "recipe": recipe, "seed": 0, "test_pairs": 240}
+    assert resumable(row, recipe, 0, 240)
+    assert resumable(row, recipe, 0, 241)  # three held-out styles: 241 asks the same 80 pairs a style
+    assert not resumable(row, recipe, 1, 240)
+    assert not resumable(row, recipe, 0, 120)
+    assert not resumable(row, {**recipe, "epochs": recipe["epochs"] + 1}, 0, 240)
+    assert not resumable({**row, "model": "v3"}, recipe, 0, 240)

@@ -8,8 +8,10 @@ For a domain nobody has described yet (lunar) this is the only reading we can me
 leave-style-out: each file translates the same `--pairs` descriptions the generator writes with
 `--seed` (a draw no training member used: members draw with seeds from 0 up), once with each
 `--findings-cost` (how much the learned findings weigh in the beam; a decoding choice, so the same
-networks are read both ways). What it cannot tell: how people would describe the domain; the
-descriptions are the generator's own styles, which every file trained on.
+networks are read both ways; without the option, each file as it decodes by its own recipe). What
+it cannot tell: how people would describe the domain; the descriptions are the generator's own
+styles, which every file trained on, and their trees are drawn as training drew its trees, so a
+small tree may be one training described otherwise (leave-style-out holds trees out).
 """
 
 from __future__ import annotations
@@ -30,8 +32,9 @@ def _named_file(value: str) -> tuple[str, Path]:
     return name, Path(path)
 
 
-def score(translator, domain: str, pairs: list, findings_cost: float) -> dict:
-    """Exact and policy matches of one translator's reading of `pairs` at one findings weight."""
+def score(translator, domain: str, pairs: list, findings_cost: Optional[float]) -> dict:
+    """Exact and policy matches of one translator's reading of `pairs` at one findings weight
+    (None: its recipe's own)."""
     from nl2policy.domains import get_domain
     from nl2policy.language.corpus import policy_key
 
@@ -40,7 +43,8 @@ def score(translator, domain: str, pairs: list, findings_cost: float) -> dict:
     exact = sum(tree == gold for (tree, _), (_, gold) in zip(decoded, pairs))
     policy = sum(policy_key(domain, tree) == policy_key(domain, gold) for (tree, _), (_, gold) in zip(decoded, pairs))
     return {"model": translator.name, "epochs": translator.cfg.epochs, "synthetic": translator.cfg.synthetic,
-            "findings": translator.findings is not None, "exact": exact, "policy": policy,
+            "findings": translator.findings is not None, "findings_cost": translator.decoding("findings_cost"),
+            "exact": exact, "policy": policy,
             "example": translator.predict([get_domain(domain).example])[0][0] == get_domain(domain).example_tree}
 
 
@@ -50,11 +54,15 @@ def main(argv: Optional[list[str]] = None) -> None:
     parser.add_argument("--pairs", type=int, default=200)
     parser.add_argument("--seed", type=int, default=4242)
     parser.add_argument("--file", type=_named_file, action="append", required=True, help="NAME=PATH of a translator file")
-    parser.add_argument("--findings-cost", type=float, action="append", default=None)
+    parser.add_argument("--findings-cost", type=float, action="append", default=None,
+                        help="a weight of the learned findings in the beam (repeatable); default: each file's own")
     parser.add_argument("--out", type=Path, default=None, help="also write the table to this file")
     args = parser.parse_args(argv)
-    from nl2policy.console import domain_or_fail, out_file_or_fail
+    from nl2policy.console import domain_or_fail, out_file_or_fail, seed_or_fail
 
+    if args.pairs < 1:
+        parser.error(f"--pairs must be at least 1, not {args.pairs}")
+    before_work(seed_or_fail, args.seed)
     before_work(domain_or_fail, args.domain)
     if args.out is not None:
         before_work(out_file_or_fail, args.out)
@@ -74,16 +82,16 @@ def main(argv: Optional[list[str]] = None) -> None:
         except Exception as exc:  # a damaged, foreign or other domain's file
             parser.error(f"cannot read a translator from {path}: {type(exc).__name__}: {exc}")
     pairs = synthetic_pairs(args.domain, args.pairs, args.seed)
-    costs = args.findings_cost or [0.0]
+    costs = args.findings_cost or [None]
     lines = [f"# {args.domain}: translator files on {len(pairs)} fresh synthetic descriptions", "",
              f"Command: `python -m experiments.translation.fresh_pairs {shlex.join(sys.argv[1:] if argv is None else argv)}`",
              "", f"Descriptions: the generator's, seed {args.seed}. Example: the domain's example text read as its tree.", "",
              "| file | model | synthetic pairs a network | epochs | findings in the beam | exact | policy | example |",
              "|---|---|---:|---:|---:|---:|---:|---|"]
     for name, translator in translators:
-        for cost in costs:
+        for cost in costs if translator.findings is not None else [None]:  # no findings: one reading
             row = score(translator, args.domain, pairs, cost)
-            weight = f"{cost:g}" if row["findings"] else "- (none saved)"
+            weight = f"{row['findings_cost']:g}" + (" (its own)" if cost is None else "") if row["findings"] else "- (none saved)"
             lines.append(f"| {name} | {row['model']} | {row['synthetic']} | {row['epochs']} | {weight} | {row['exact']} | "
                          f"{row['policy']} | {'right' if row['example'] else 'wrong'} |")
             print(lines[-1], flush=True)

@@ -78,7 +78,7 @@ def run_fold(domain: str, fold: str, synthetic: int, test_pairs: int, seed: int 
     by_style = {style: 100.0 * sum(r for (s, _, _), r in zip(test, right) if s == style)
                 / sum(s == style for s, _, _ in test) for style in held}
     return {"domain": domain, "fold": fold, "held_out": list(held), "trained_on": kept, "model": DEFAULT_MODEL,
-            "synthetic_per_network": synthetic, "ensemble": cfg.ensemble, "seed": seed, "test_pairs": len(test),
+            "recipe": cfg.to_dict(), "synthetic_per_network": synthetic, "ensemble": cfg.ensemble, "seed": seed, "test_pairs": len(test),
             "exact": 100.0 * sum(right) / len(test), "policy": 100.0 * sum(policy) / len(test),
             "valid": 100.0 * valid / len(test), "confident": sum(sure),
             "confident_right": sum(s and r for s, r in zip(sure, right)),
@@ -93,6 +93,22 @@ def _valid(tree, vocab) -> bool:
         return False
 
 
+def _settings(row: dict) -> str:
+    """The training and decoding settings a fold recorded (older rows did not record them)."""
+    recipe = row.get("recipe")
+    if recipe is None:
+        return " (other settings not recorded)"
+    return f", {recipe['epochs']} epochs, the learned findings weighing the beam {recipe['findings_cost']:g}"
+
+
+def resumable(row: dict, recipe: dict, seed: int, test_pairs: int) -> bool:
+    """Whether a kept fold was run with the settings asked for now, so a resumed table holds one
+    recipe: the same model and recipe (the domain's [translator] settings included), seed and test size."""
+    size = test_pairs // len(FOLDS[row["fold"]]) * len(FOLDS[row["fold"]])
+    return (row["model"] == DEFAULT_MODEL and row.get("recipe") == recipe and row["seed"] == seed
+            and row["test_pairs"] == size)
+
+
 def write_table(rows: list[dict], out: Path, command: str) -> Path:
     """results table: one line a fold, and the mean."""
     out.mkdir(parents=True, exist_ok=True)
@@ -100,7 +116,7 @@ def write_table(rows: list[dict], out: Path, command: str) -> Path:
     lines = [f"# Leave-style-out: the {rows[0]['domain']} translator on whole styles it never saw", "",
              f"Command: `{command}`", "",
              f"Recipe: {rows[0]['model']}, {rows[0]['ensemble']} networks, {rows[0]['synthetic_per_network']} "
-             f"synthetic pairs a network from the styles not held out, seed {rows[0]['seed']}; test: "
+             f"synthetic pairs a network from the styles not held out{_settings(rows[0])}, seed {rows[0]['seed']}; test: "
              f"{rows[0]['test_pairs']} fresh pairs a fold in the held-out styles, seed {TEST_SEED}, trees no "
              "training pair has. What this protocol cannot tell: experiments/translation/leave_style_out.py.", "",
              "| held out | styles | exact % | policy % | valid % | confident (right) | by style (exact %) | minutes |",
@@ -131,16 +147,16 @@ def main(domain: str = "lunar", synthetic: int = 1000, test_pairs: int = 240, se
         err.print(f"[red]error:[/red] unknown fold(s) {sorted(unknown)}; known: {', '.join(FOLDS)}")
         raise SystemExit(2)
     command = (f"python -m experiments.translation.leave_style_out --domain {domain} --synthetic {synthetic} "
-               f"--test-pairs {test_pairs} --seed {seed} --out {out}")
+               f"--test-pairs {test_pairs} --seed {seed} --workers {workers} --out {out}")
     runs_path = out / domain / "runs.json"
     kept_rows = json.loads(runs_path.read_text()) if runs_path.is_file() else []
-    others = sorted({r["model"] for r in kept_rows} - {DEFAULT_MODEL})
-    if others:  # resuming would rewrite their table as this version's
-        err.print(f"[red]error:[/red] {runs_path} holds translator {', '.join(others)}'s folds; "
-                  f"write {DEFAULT_MODEL}'s to another --out")
+    recipe = json.loads(json.dumps(replace(shipped_config(domain, DEFAULT_MODEL), synthetic=synthetic).to_dict()))
+    others = [r["fold"] for r in kept_rows if not resumable(r, recipe, seed, test_pairs)]
+    if others:  # resuming would rewrite (and lose) them, or mix recipes in one table
+        err.print(f"[red]error:[/red] {runs_path} holds folds ({', '.join(others)}) of another translator or other "
+                  f"settings than {DEFAULT_MODEL}'s now with these options; write to another --out")
         raise SystemExit(2)
-    rows = [r for r in kept_rows
-            if r["synthetic_per_network"] == synthetic and r["seed"] == seed and r["test_pairs"] == test_pairs]
+    rows = kept_rows
     for name in fold or list(FOLDS):
         if any(r["fold"] == name for r in rows):
             continue
@@ -149,6 +165,7 @@ def main(domain: str = "lunar", synthetic: int = 1000, test_pairs: int = 240, se
             rows.append(run_fold(domain, name, synthetic, test_pairs, seed, workers,
                                  progress=lambda done, total: bar.update(task, completed=done, total=total)))
         write_table(rows, out / domain, command)
+    write_table(rows, out / domain, command)
     console.print((out / domain / "leave_style_out.md").read_text(), markup=False, highlight=False)
 
 
