@@ -59,6 +59,16 @@ def test_summary_sets_the_defaults_cv_beside_the_paper_with_leave_writers_out(tm
     assert "| highway | CV (round 1) | 80.00 [1 folds] | not run | 80.38 | no |" in part
 
 
+def test_summary_keeps_the_defaults_missing_cv_in_view(tmp_path):
+    """A default with leave-writers-out but no CV yet still has its row beside the paper: not run."""
+    from nl2policy.language.models.config import DEFAULT_MODEL
+
+    runs = [_run("taxi", DEFAULT_MODEL, "writers-f0", "writers", 0.75), _run("highway", "m", "cv-r0-f0", "cv", 0.8)]
+    part = _summary(tmp_path, runs).split("## The default against the paper")[1].split("\n## ")[0]
+    assert "| taxi | CV (round 1) | not run | 75.00 [1 folds] | 86.30 | - |" in part
+    assert "| highway |" not in part  # the default has no highway fold at all
+
+
 def test_table_one_keeps_to_exact_accuracy_and_links_the_details_file(tmp_path):
     _summary(tmp_path, [_run("taxi", "m", "cv-r0-f0", "cv", 0.5)])
     main, details = (tmp_path / "table.md").read_text(), (tmp_path / "table-details.md").read_text()
