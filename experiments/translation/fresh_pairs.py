@@ -35,16 +35,15 @@ def _named_file(value: str) -> tuple[str, Path]:
 def score(translator, domain: str, pairs: list, findings_cost: Optional[float]) -> dict:
     """Exact and policy matches of one translator's reading of `pairs` at one findings weight
     (None: its recipe's own)."""
+    from experiments.translation.evaluate import score as fold_score
     from nl2policy.domains import get_domain
-    from nl2policy.language.corpus import policy_key
 
     translator.findings_cost = findings_cost if translator.findings is not None else 0.0
     decoded = translator.predict([text for text, _ in pairs])
-    exact = sum(tree == gold for (tree, _), (_, gold) in zip(decoded, pairs))
-    policy = sum(policy_key(domain, tree) == policy_key(domain, gold) for (tree, _), (_, gold) in zip(decoded, pairs))
+    scored = fold_score(domain, [tree for tree, _ in decoded], [gold for _, gold in pairs])  # the lab's one scorer
     return {"model": translator.name, "epochs": translator.cfg.epochs, "synthetic": translator.cfg.synthetic,
             "findings": translator.findings is not None, "findings_cost": translator.decoding("findings_cost"),
-            "exact": exact, "policy": policy,
+            "exact": round(scored["tree_acc"] * scored["n"]), "policy": round(scored["policy_acc"] * scored["n"]),
             "example": translator.predict([get_domain(domain).example])[0][0] == get_domain(domain).example_tree}
 
 

@@ -48,6 +48,12 @@ assert sorted(s for group in FOLDS.values() for s in group) == sorted(STYLES)
 TEST_SEED = 90_000  # the held-out pairs' draw: apart from every training member's (seed + member)
 
 
+def fold_recipe(domain: str, synthetic: int):
+    """The config a fold trains: the shipped recipe with the domain's [translator] settings and
+    `synthetic` pairs a network."""
+    return replace(shipped_config(domain, DEFAULT_MODEL), synthetic=synthetic)
+
+
 def run_fold(domain: str, fold: str, synthetic: int, test_pairs: int, seed: int = 0, workers: int = 1,
              progress: Optional[Callable[[int, int], None]] = None) -> dict:
     """Train the shipped recipe (with `synthetic` pairs a network) on every style but `fold`'s and
@@ -58,7 +64,7 @@ def run_fold(domain: str, fold: str, synthetic: int, test_pairs: int, seed: int 
     test = [(style, text, tree) for k, style in enumerate(held)  # the same count of each held-out style
             for text, tree in synthetic_pairs(domain, test_pairs // len(held), TEST_SEED + k, styles={style})]
     test_keys = {policy_key(domain, tree) for _, _, tree in test}
-    cfg = replace(shipped_config(domain, DEFAULT_MODEL), synthetic=synthetic)
+    cfg = fold_recipe(domain, synthetic)
     cfg_seed = seed + cfg.seed_offset
 
     def pairs(member: int) -> list:
@@ -150,7 +156,7 @@ def main(domain: str = "lunar", synthetic: int = 1000, test_pairs: int = 240, se
                f"--test-pairs {test_pairs} --seed {seed} --workers {workers} --out {out}")
     runs_path = out / domain / "runs.json"
     kept_rows = json.loads(runs_path.read_text()) if runs_path.is_file() else []
-    recipe = json.loads(json.dumps(replace(shipped_config(domain, DEFAULT_MODEL), synthetic=synthetic).to_dict()))
+    recipe = json.loads(json.dumps(fold_recipe(domain, synthetic).to_dict()))  # as runs.json holds it
     others = [r["fold"] for r in kept_rows if not resumable(r, recipe, seed, test_pairs)]
     if others:  # resuming would rewrite (and lose) them, or mix recipes in one table
         err.print(f"[red]error:[/red] {runs_path} holds folds ({', '.join(others)}) of another translator or other "
@@ -165,7 +171,8 @@ def main(domain: str = "lunar", synthetic: int = 1000, test_pairs: int = 240, se
             rows.append(run_fold(domain, name, synthetic, test_pairs, seed, workers,
                                  progress=lambda done, total: bar.update(task, completed=done, total=total)))
         write_table(rows, out / domain, command)
-    write_table(rows, out / domain, command)
+    if not (out / domain / "leave_style_out.md").is_file():  # every fold kept, its table gone
+        write_table(rows, out / domain, command)
     console.print((out / domain / "leave_style_out.md").read_text(), markup=False, highlight=False)
 
 
